@@ -1,0 +1,49 @@
+"""Procrustes error against ground truth (Eq 3.3-3.10): the disparity after removing translation,
+scale and rotation/reflection; equal to `scipy.spatial.procrustes`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ProcrustesResult:
+    disparity: float
+    truth: np.ndarray    # standardised truth (centred, unit Frobenius norm)
+    aligned: np.ndarray  # embedding after the best similarity transform onto `truth`
+
+
+def _standardise(X: np.ndarray, name: str) -> np.ndarray:
+    X = X - X.mean(axis=0)
+    norm = np.linalg.norm(X)
+    if norm == 0:
+        raise ValueError(f"{name} has all points identical: Procrustes error is undefined")
+    return X / norm
+
+
+def procrustes(truth: np.ndarray, embedding: np.ndarray) -> ProcrustesResult:
+    """Align `embedding` onto `truth` (rows are corresponding points). Columns are zero-padded to
+    the same count, so a 1-D embedding can be compared with 2-D truth."""
+    A = np.asarray(truth, dtype=np.float64)
+    B = np.asarray(embedding, dtype=np.float64)
+    A = A.reshape(-1, 1) if A.ndim == 1 else A
+    B = B.reshape(-1, 1) if B.ndim == 1 else B
+    if A.ndim != 2 or B.ndim != 2 or A.shape[0] != B.shape[0]:
+        raise ValueError(f"truth and embedding need the same number of rows: {A.shape} vs {B.shape}")
+    if A.shape[0] < 2:
+        raise ValueError("Procrustes needs at least 2 points")
+    d = max(A.shape[1], B.shape[1])
+    A = np.pad(A, ((0, 0), (0, d - A.shape[1])))
+    B = np.pad(B, ((0, 0), (0, d - B.shape[1])))
+    A = _standardise(A, "truth")
+    B = _standardise(B, "embedding")
+    U, s, Vt = np.linalg.svd(B.T @ A)
+    R = U @ Vt
+    aligned = (B @ R) * s.sum()
+    return ProcrustesResult(float(np.square(A - aligned).sum()), A, aligned)
+
+
+def procrustes_error(truth: np.ndarray, embedding: np.ndarray) -> float:
+    return procrustes(truth, embedding).disparity

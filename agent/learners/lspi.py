@@ -1,0 +1,119 @@
+"""Least-squares policy iteration (Lagoudakis & Parr 2003): LSTD-Q with a small ridge term.
+
+Samples (s, a, r, s', done) are kept (up to `capacity`, newest kept); `iterate()` runs one LSTD-Q
+evaluation of the current greedy policy over all of them, which is one policy-iteration step.
+Features come from a basis with `k` and `phi(states, actions) -> (n, k)` (dense or scipy sparse).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+
+@dataclass(frozen=True)
+class TabularBasis:
+    """One-hot over (state, action): the tabular case as a linear architecture."""
+
+    n_states: int
+    n_actions: int
+
+    @property
+    def k(self) -> int:
+        return self.n_states * self.n_actions
+
+    def phi(self, states: np.ndarray, actions: np.ndarray) -> sp.csr_matrix:
+        states = np.asarray(states, dtype=np.int64).reshape(-1)
+        actions = np.asarray(actions, dtype=np.int64).reshape(-1)
+        if states.size and (states.min() < 0 or states.max() >= self.n_states):
+            raise ValueError(f"state ids must be in 0..{self.n_states - 1}")
+        cols = states * self.n_actions + actions
+        n = cols.size
+        return sp.csr_matrix((np.ones(n), (np.arange(n), cols)), shape=(n, self.k))
+
+
+class LSPI:
+    def __init__(self, basis: TabularBasis, gamma: float = 0.9, ridge: float = 1e-3,
+                 capacity: int = 50_000, tie_tolerance: float = 0.05) -> None:
+        if not 0.0 <= gamma < 1.0:
+            raise ValueError("gamma must be in [0, 1)")
+        if ridge < 0:
+            raise ValueError("ridge must be >= 0")
+        if capacity < 1:
+            raise ValueError("capacity must be >= 1")
+        self.basis = basis
+        self.gamma = gamma
+        self.ridge = ridge
+        self.capacity = capacity
+        self.tie_tolerance = tie_tolerance
+        self.reset()
+
+    def reset(self) -> None:
+        self._s: list[int] = []
+        self._a: list[int] = []
+        self._r: list[float] = []
+        self._s2: list[int] = []
+        self._done: list[bool] = []
+        self.w = np.zeros(self.basis.k)
+        self.iterations = 0
+
+    @property
+    def n_samples(self) -> int:
+        return len(self._s)
+
+    def learn_one(self, s: int, a: int, r: float, s_next: int, done: bool) -> None:
+        self._s.append(int(s))
+        self._a.append(int(a))
+        self._r.append(float(r))
+        self._s2.append(int(s_next))
+        self._done.append(bool(done))
+        if len(self._s) > self.capacity:
+            for buf in (self._s, self._a, self._r, self._s2, self._done):
+                del buf[0]
+
+    def q(self, s: int) -> np.ndarray:
+        n = self.basis.n_actions
+        return np.asarray(self.basis.phi(np.full(n, s), np.arange(n)) @ self.w).reshape(-1)
+
+    def greedy(self, s: int, prefer: int | None = None) -> int:
+        """argmax_a Q(s, a); among near-ties (within `tie_tolerance` of the best, relative), keep
+        `prefer` (e.g. the previous action) if it is one of them, else the lowest index. Consistent
+        tie-breaking gives consistent traces, which the embedding needs. The tolerance is relative
+        because with goal rewards the gap between an optimal and a detour action is the fixed
+        fraction 1 - gamma^2 of the value, while the ridge term perturbs exact ties slightly."""
+        q = self.q(s)
+        ties = np.flatnonzero(self._tied(q[None, :])[0])
+        if prefer is not None and prefer in ties:
+            return int(prefer)
+        return int(ties[0])
+
+    def _greedy_many(self, states: np.ndarray) -> np.ndarray:
+        n = self.basis.n_actions
+        Q = np.stack([np.asarray(self.basis.phi(states, np.full(states.size, a)) @ self.w).reshape(-1)
+                      for a in range(n)], axis=1)
+        return self._tied(Q).argmax(axis=1)
+
+    def _tied(self, Q: np.ndarray) -> np.ndarray:
+        best = Q.max(axis=1, keepdims=True)
+        return Q >= best - self.tie_tolerance * np.abs(best) - 1e-12
+
+    def iterate(self) -> float:
+        """One LSTD-Q policy evaluation of the current greedy policy; returns ||w_new - w_old||."""
+        if not self._s:
+            return 0.0
+        S, A, R = np.array(self._s), np.array(self._a), np.array(self._r)
+        S2, done = np.array(self._s2), np.array(self._done)
+        A2 = self._greedy_many(S2)
+        Phi = self.basis.phi(S, A)
+        Phi2 = self.basis.phi(S2, A2).multiply((~done)[:, None]).tocsr()
+        Amat = (Phi.T @ (Phi - self.gamma * Phi2))
+        Amat = Amat.toarray() if sp.issparse(Amat) else np.asarray(Amat)
+        b = np.asarray(Phi.T @ R).reshape(-1)
+        Amat[np.diag_indices_from(Amat)] += self.ridge
+        w = np.linalg.solve(Amat, b)
+        change = float(np.linalg.norm(w - self.w))
+        self.w = w
+        self.iterations += 1
+        return change

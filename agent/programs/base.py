@@ -1,0 +1,84 @@
+"""What a developmental program is: an online policy over one world's observations that, now and
+then, emits an embedding of what it learned (and events about itself).
+
+A program answers every observation with exactly one Decision, handles one observation at a time,
+owns its random generator, and never looks at ground truth (the link scores embeddings). Programs
+are deterministic given their seed and the observation stream, so a recording replayed offline
+gives the same embeddings.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from protocol.messages import Observation, WorldSpec
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The answer to one observation: action values, or a reset to `start` (-1 = random)."""
+
+    values: tuple[float, ...] = ()
+    reset: bool = False
+    start: int = -1
+
+
+@dataclass(frozen=True)
+class EmbeddingOutput:
+    trigger: str
+    ids: tuple[int, ...]
+    coordinates: np.ndarray
+    eigenvalues: tuple[float, ...]
+    step: int
+    metrics: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class EventOutput:
+    kind: str
+    detail: str
+    step: int
+    values: dict[str, float] = field(default_factory=dict)
+
+
+class Program(abc.ABC):
+    name = "program"
+
+    def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
+        self.spec = spec
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self._outbox: list[Any] = []
+
+    @abc.abstractmethod
+    def act(self, obs: Observation) -> Decision:
+        """Learn from `obs` and answer it."""
+
+    def drain(self) -> list[Any]:
+        """Embeddings and events produced since the last call."""
+        out, self._outbox = self._outbox, []
+        return out
+
+    def emit(self, item: Any) -> None:
+        self._outbox.append(item)
+
+    def world_restarted(self) -> None:
+        """The world process restarted (new session): an episode in progress is gone."""
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_outbox"] = []
+        return state
+
+
+class EchoProgram(Program):
+    """Answers every observation with action 0: the baseline for the loop benchmark."""
+
+    name = "echo"
+
+    def act(self, obs: Observation) -> Decision:
+        return Decision((0.0,))

@@ -1,0 +1,120 @@
+"""The gridworld program (ch. 5): LSPI toward the goal, then sensorimotor embedding of the greedy
+policy's action traces from every start state.
+
+Phases alternate: *explore* (uniformly random actions, samples stored for LSPI) until
+`samples_per_iteration` new samples have arrived, one LSPI iteration, then *embed*: run the greedy
+policy from each start state in turn (the world resets to it), record the action traces, edit
+distances, classical MDS to 2-D, emit Embedding vN. Error falls as LSPI iterates (Fig 5.4).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.embedding import classical_mds, trace_distances
+from agent.learners.lspi import LSPI, TabularBasis
+from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from protocol.errors import SpecMismatch
+from protocol.messages import Observation, WorldSpec
+
+
+class GridworldProgram(Program):
+    name = "gridworld"
+
+    def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 400,
+                 max_trace: int = 60, gamma: float = 0.9, ridge: float = 1e-3, dims: int = 2,
+                 policy: str = "lspi", substitution_cost: int = 2) -> None:
+        super().__init__(spec, seed)
+        if not spec.action_space.discrete:
+            raise SpecMismatch(f"gridworld program needs discrete actions; world {spec.world_id} has a box")
+        if spec.n_starts < 3:
+            raise SpecMismatch(f"gridworld program needs >= 3 start states, world offers {spec.n_starts}")
+        sensor = spec.sensor("state")
+        if policy not in ("lspi", "random"):
+            raise ValueError("policy must be 'lspi' or 'random'")
+        self.n_states = int(sensor.high) + 1
+        self.n_actions = spec.action_space.n
+        self.samples_per_iteration = samples_per_iteration
+        self.max_trace = max_trace
+        self.dims = dims
+        self.policy = policy
+        self.substitution_cost = substitution_cost
+        self.lspi = LSPI(TabularBasis(self.n_states, self.n_actions), gamma=gamma, ridge=ridge)
+        self.phase = "explore"
+        self.new_samples = 0
+        self.version = 0
+        self._prev: tuple[int, int] | None = None
+        self._start = 0
+        self._traces: list[list[int]] = []
+        self._trace: list[int] = []
+
+    # helpers -----------------------------------------------------------------------------------
+    def _state(self, obs: Observation) -> int:
+        s = int(obs.tensors["state"].reshape(-1)[0])
+        if not 0 <= s < self.n_states:
+            raise SpecMismatch(f"state id {s} outside 0..{self.n_states - 1}")
+        return s
+
+    def _choose(self, s: int) -> int:
+        if self.policy == "random":
+            return int(self.rng.integers(self.n_actions))
+        prefer = self._trace[-1] if self._trace else None
+        return self.lspi.greedy(s, prefer)
+
+    def _finish_embedding(self, step: int) -> None:
+        D = trace_distances(self._traces, kind="edit", substitution_cost=self.substitution_cost)
+        mds = classical_mds(D, self.dims)
+        self.version += 1
+        reached = sum(1 for tr in self._traces if len(tr) < self.max_trace)
+        trigger = "random_policy" if self.policy == "random" else f"policy_iteration {self.lspi.iterations}"
+        self.emit(EmbeddingOutput(
+            trigger=trigger, ids=tuple(range(len(self._traces))), coordinates=mds.coordinates,
+            eigenvalues=tuple(float(e) for e in mds.eigenvalues[: min(10, len(mds.eigenvalues))]), step=step,
+            metrics={"lspi_iterations": float(self.lspi.iterations), "samples": float(self.lspi.n_samples),
+                     "goal_reached_fraction": reached / len(self._traces),
+                     "mean_trace_length": float(np.mean([len(t) for t in self._traces]))},
+        ))
+
+    # the program -------------------------------------------------------------------------------
+    def act(self, obs: Observation) -> Decision:
+        s = self._state(obs)
+        if self.phase == "explore":
+            if obs.t > 0 and self._prev is not None:
+                ps, pa = self._prev
+                self.lspi.learn_one(ps, pa, obs.reward, s, obs.done)
+                self.new_samples += 1
+            self._prev = None
+            if self.new_samples >= self.samples_per_iteration:
+                self.new_samples = 0
+                if self.policy == "lspi":
+                    change = self.lspi.iterate()
+                    self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}",
+                                          obs.step, {"weight_change": change,
+                                                     "samples": float(self.lspi.n_samples)}))
+                self.phase, self._start, self._traces, self._trace = "embed", 0, [], []
+                return Decision(reset=True, start=0)
+            if obs.done:
+                return Decision(reset=True, start=-1)
+            a = int(self.rng.integers(self.n_actions))
+            self._prev = (s, a)
+            return Decision((float(a),))
+
+        # phase == "embed": run the greedy policy from start state self._start
+        if obs.t == 0 and obs.start != self._start:
+            return Decision(reset=True, start=self._start)  # e.g. the world restarted mid-episode
+        if obs.done or len(self._trace) >= self.max_trace:
+            self._traces.append(self._trace)
+            self._trace = []
+            self._start += 1
+            if self._start < self.spec.n_starts:
+                return Decision(reset=True, start=self._start)
+            self._finish_embedding(obs.step)
+            self.phase = "explore"
+            return Decision(reset=True, start=-1)
+        a = self._choose(s)
+        self._trace.append(a)
+        return Decision((float(a),))
+
+    def world_restarted(self) -> None:
+        self._prev = None
+        self._trace = []

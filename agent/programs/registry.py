@@ -1,0 +1,30 @@
+"""Programs by name (the world's `program` hint picks one)."""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from agent.programs.base import EchoProgram, Program
+from protocol.messages import WorldSpec
+
+
+def _gridworld(spec: WorldSpec, seed: int, **kw: Any) -> Program:
+    from agent.programs.gridworld import GridworldProgram
+
+    return GridworldProgram(spec, seed, **kw)
+
+
+PROGRAMS: dict[str, Callable[..., Program]] = {
+    "gridworld": _gridworld,
+    "echo": lambda spec, seed, **kw: EchoProgram(spec, seed),
+}
+
+
+def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
+    name = spec.program or spec.kind
+    try:
+        factory = PROGRAMS[name]
+    except KeyError:
+        raise ValueError(f"no developmental program {name!r} for world {spec.world_id!r}; "
+                         f"known: {', '.join(sorted(PROGRAMS))}") from None
+    return factory(spec, seed, **kw)

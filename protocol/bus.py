@@ -1,0 +1,321 @@
+"""The message bus over Eclipse Zenoh: the only module of the project that imports zenoh.
+
+Sessions are built from the flags zenoh's own examples use (`--mode`, `--connect`, `--listen`,
+`--config`, `--no-multicast-scouting`). The embedded default needs no router and no config: the
+agent daemon is a Zenoh *router* listening on tcp/127.0.0.1:7447, worlds are *peers* that keep
+retrying that endpoint until the agent appears, and query tools are *clients* that fail fast
+when no agent is reachable. Multicast scouting is off and nothing listens beyond loopback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import logging
+import threading
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Iterator, NamedTuple
+
+import zenoh
+
+from protocol.keys import DEFAULT_ENDPOINT
+
+log = logging.getLogger("sme.bus")
+
+
+class BusError(RuntimeError):
+    """The bus could not be opened or used; the message says what to do."""
+
+
+class BusMessage(NamedTuple):
+    key: str
+    payload: bytes
+    encoding: str
+    kind: str = "put"  # "put" or "delete"
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    mode: str = "client"
+    connect: tuple[str, ...] = (DEFAULT_ENDPOINT,)
+    listen: tuple[str, ...] = ()
+    config_file: str | None = None
+    multicast_scouting: bool = False
+    lease_ms: int | None = None
+
+    ROLES = ("agent", "world", "tool")
+
+    @classmethod
+    def for_role(cls, role: str, endpoint: str = DEFAULT_ENDPOINT) -> "BusConfig":
+        """Embedded defaults: agent = router listening on `endpoint`; world = retrying peer; tool = client."""
+        if role == "agent":
+            return cls(mode="router", connect=(), listen=(endpoint,))
+        if role == "world":
+            return cls(mode="peer", connect=(endpoint,), listen=())
+        if role == "tool":
+            return cls(mode="client", connect=(endpoint,), listen=())
+        raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
+
+    def zenoh_config(self) -> "zenoh.Config":
+        if self.mode not in ("router", "peer", "client"):
+            raise BusError(f"--mode must be router, peer or client, not {self.mode!r}")
+        cfg = zenoh.Config.from_file(self.config_file) if self.config_file else zenoh.Config()
+        cfg.insert_json5("mode", json.dumps(self.mode))
+        cfg.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        cfg.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        cfg.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
+        cfg.insert_json5("scouting/gossip/enabled", "false" if self.mode != "router" else "true")
+        if self.lease_ms:
+            cfg.insert_json5("transport/link/tx/lease", str(int(self.lease_ms)))
+        return cfg
+
+    def describe(self) -> str:
+        ends = ",".join(self.listen if self.mode == "router" else self.connect) or "-"
+        return f"{self.mode} {'listening on' if self.mode == 'router' else 'connecting to'} {ends}"
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, role: str) -> None:
+    """The zenoh example flags, with this role's embedded default explained in --help."""
+    d = BusConfig.for_role(role)
+    g = parser.add_argument_group(
+        "zenoh", f"bus session (default for this command: {d.describe()}; no multicast, loopback only)"
+    )
+    g.add_argument("--mode", choices=["router", "peer", "client"], default=None,
+                   help=f"zenoh session mode (default: {d.mode})")
+    g.add_argument("-e", "--connect", action="append", default=None, metavar="ENDPOINT",
+                   help="endpoint to connect to, repeatable (default: %s)" % (",".join(d.connect) or "none"))
+    g.add_argument("-l", "--listen", action="append", default=None, metavar="ENDPOINT",
+                   help="endpoint to listen on, repeatable (default: %s)" % (",".join(d.listen) or "none"))
+    g.add_argument("-c", "--config", default=None, metavar="FILE",
+                   help="zenoh JSON5 configuration file; the flags above override it")
+    g.add_argument("--no-multicast-scouting", action="store_true",
+                   help="disable multicast scouting (already the default; accepted for zenoh compatibility)")
+    g.add_argument("--multicast-scouting", action="store_true",
+                   help="enable multicast scouting (off by default: it reaches beyond this machine)")
+
+
+def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
+    cfg = BusConfig.for_role(role)
+    if args.mode:
+        cfg = replace(cfg, mode=args.mode)
+    if args.connect is not None:
+        cfg = replace(cfg, connect=tuple(args.connect))
+    if args.listen is not None:
+        cfg = replace(cfg, listen=tuple(args.listen))
+    if args.config:
+        cfg = replace(cfg, config_file=args.config)
+    return replace(cfg, multicast_scouting=bool(args.multicast_scouting and not args.no_multicast_scouting))
+
+
+def _encoding_str(sample: Any) -> str:
+    try:
+        return str(sample.encoding)
+    except Exception:  # pragma: no cover - defensive: foreign encodings
+        return ""
+
+
+def _message(sample: Any) -> BusMessage:
+    kind = "delete" if sample.kind == zenoh.SampleKind.DELETE else "put"
+    return BusMessage(str(sample.key_expr), sample.payload.to_bytes(), _encoding_str(sample), kind)
+
+
+def _guard(callback: Callable[[BusMessage], None], what: str) -> Callable[[Any], None]:
+    """Zenoh callbacks run on zenoh's threads: an exception must be logged, never lost silently."""
+
+    def run(sample: Any) -> None:
+        try:
+            callback(_message(sample))
+        except Exception:
+            log.exception("callback for %s failed", what)
+
+    return run
+
+
+class Inbox:
+    """A bounded queue filled by a subscriber: when full, the oldest message is dropped and counted."""
+
+    def __init__(self, maxsize: int) -> None:
+        if maxsize < 1:
+            raise ValueError("maxsize must be >= 1")
+        self.maxsize = maxsize
+        self._q: collections.deque[BusMessage] = collections.deque()
+        self._cv = threading.Condition()
+        self.dropped = 0
+        self._closed = False
+
+    def push(self, msg: BusMessage) -> None:
+        with self._cv:
+            if len(self._q) >= self.maxsize:
+                self._q.popleft()
+                self.dropped += 1
+            self._q.append(msg)
+            self._cv.notify()
+
+    def get(self, timeout: float | None = None) -> BusMessage | None:
+        """The oldest message, or None after `timeout` seconds (or once closed and empty)."""
+        with self._cv:
+            if not self._q and not self._closed:
+                self._cv.wait(timeout)
+            return self._q.popleft() if self._q else None
+
+    def close(self) -> None:
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
+
+    def __len__(self) -> int:
+        return len(self._q)
+
+
+class Publisher:
+    def __init__(self, pub: Any, encoding: Any) -> None:
+        self._pub = pub
+        self._encoding = encoding
+
+    def put(self, payload: bytes) -> None:
+        self._pub.put(payload, encoding=self._encoding)
+
+
+class Bus:
+    """A Zenoh session with the few operations the project needs. Always use as a context manager:
+    a session with declared callbacks keeps the interpreter alive until it is closed."""
+
+    def __init__(self, config: BusConfig) -> None:
+        self.config = config
+        try:
+            self._session = zenoh.open(config.zenoh_config())
+        except zenoh.ZError as e:
+            hint = ""
+            if config.mode == "client":
+                hint = (f" - is `sme agent` running? (this command connects to "
+                        f"{', '.join(config.connect)}; pass --connect to point elsewhere)")
+            elif config.mode == "router":
+                hint = f" - is another agent already listening on {', '.join(config.listen)}? (--listen picks another)"
+            raise BusError(f"cannot open zenoh session ({config.describe()}): {e}{hint}") from None
+        self._declared: list[Any] = []
+        self._lock = threading.Lock()
+        self._closed = False
+
+    # context manager ---------------------------------------------------------------------------
+    def __enter__(self) -> "Bus":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        try:
+            self._session.close()
+        except Exception:  # pragma: no cover - closing twice or during interpreter shutdown
+            log.debug("session close failed", exc_info=True)
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @staticmethod
+    def encoding(schema: str | None) -> Any:
+        if schema is None:
+            return zenoh.Encoding.APPLICATION_OCTET_STREAM
+        return zenoh.Encoding.APPLICATION_PROTOBUF.with_schema(schema)
+
+    # publish -----------------------------------------------------------------------------------
+    def publisher(self, key: str, schema: str | None = None, *, express: bool = True,
+                  block: bool = True) -> Publisher:
+        """A declared publisher. `block=True` (reliable, congestion BLOCK) for lockstep traffic;
+        `block=False` drops under congestion (for best-effort live views)."""
+        cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        pub = self._session.declare_publisher(key, express=express, congestion_control=cc,
+                                              encoding=self.encoding(schema))
+        self._declared.append(pub)
+        return Publisher(pub, self.encoding(schema))
+
+    def put(self, key: str, payload: bytes, schema: str | None = None) -> None:
+        self._session.put(key, payload, encoding=self.encoding(schema), express=True)
+
+    # subscribe ---------------------------------------------------------------------------------
+    def subscribe(self, key: str, callback: Callable[[BusMessage], None]) -> Any:
+        sub = self._session.declare_subscriber(key, _guard(callback, key))
+        self._declared.append(sub)
+        return sub
+
+    def inbox(self, key: str, maxsize: int = 1024) -> Inbox:
+        box = Inbox(maxsize)
+        self.subscribe(key, box.push)
+        return box
+
+    # query -------------------------------------------------------------------------------------
+    def queryable(self, key: str, handler: Callable[[str, bytes | None], bytes],
+                  schema: str | None = None) -> Any:
+        """Answer `get`s on `key` with `handler(key, payload)`; an exception becomes an error reply."""
+        enc = self.encoding(schema)
+
+        def on_query(query: Any) -> None:
+            try:
+                payload = query.payload.to_bytes() if query.payload is not None else None
+                reply = handler(str(query.key_expr), payload)
+                query.reply(query.key_expr, reply, encoding=enc)
+            except Exception as e:
+                log.warning("queryable %s: %s", key, e)
+                try:
+                    query.reply_err(str(e).encode())
+                except Exception:  # pragma: no cover
+                    pass
+
+        q = self._session.declare_queryable(key, on_query)
+        self._declared.append(q)
+        return q
+
+    def get(self, key: str, timeout: float = 2.0, payload: bytes | None = None) -> list[BusMessage]:
+        """Replies to a query (errors raise BusError)."""
+        out = []
+        for reply in self._session.get(key, timeout=timeout, payload=payload):
+            if reply.ok is not None:
+                out.append(_message(reply.ok))
+            else:
+                raise BusError(f"query {key}: {reply.err.payload.to_bytes().decode(errors='replace')}")
+        return out
+
+    # liveliness --------------------------------------------------------------------------------
+    def token(self, key: str) -> Any:
+        tok = self._session.liveliness().declare_token(key)
+        self._declared.append(tok)
+        return tok
+
+    def watch_alive(self, key: str, on_change: Callable[[str, bool], None], history: bool = True) -> Any:
+        """Call `on_change(key, alive)` when a liveliness token matching `key` appears or vanishes."""
+
+        def cb(msg: BusMessage) -> None:
+            on_change(msg.key, msg.kind == "put")
+
+        sub = self._session.liveliness().declare_subscriber(key, _guard(cb, key), history=history)
+        self._declared.append(sub)
+        return sub
+
+    def alive(self, key: str, timeout: float = 1.0) -> list[str]:
+        return [str(r.ok.key_expr) for r in self._session.liveliness().get(key, timeout=timeout)
+                if r.ok is not None]
+
+    def undeclare(self, entity: Any) -> None:
+        try:
+            entity.undeclare()
+        except Exception:  # pragma: no cover - already gone with a closed session
+            pass
+        if entity in self._declared:
+            self._declared.remove(entity)
+
+
+def open_bus(config: BusConfig) -> Bus:
+    return Bus(config)
+
+
+def iter_inbox(box: Inbox, stop: threading.Event, poll: float = 0.2) -> Iterator[BusMessage]:
+    while not stop.is_set():
+        msg = box.get(poll)
+        if msg is not None:
+            yield msg

@@ -1,0 +1,307 @@
+"""Validating codec between the dataclasses in `messages` and Protocol Buffers bytes.
+
+Every decode checks, before anything large is allocated: total size, schema version, tensor count,
+dtype whitelist, shape/bytes agreement, per-tensor size, and finiteness of rewards and float
+tensors. Each failure raises a typed `ProtocolError` whose message says what was wrong.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable
+
+import numpy as np
+from google.protobuf.message import DecodeError
+
+from protocol import errors, messages as m
+from protocol import sme_v1_pb2 as pb
+
+MAX_MESSAGE_BYTES = 64 * 1024 * 1024
+MAX_TENSORS = 64
+MAX_TENSOR_BYTES = 32 * 1024 * 1024
+MAX_DIMS = 8
+
+DTYPES: dict[str, np.dtype] = {
+    name: np.dtype(name).newbyteorder("<")
+    for name in ("uint8", "int8", "uint16", "int16", "int32", "int64", "float32", "float64", "bool")
+}
+
+SCHEMA_NAMES = {
+    m.WorldSpec: "sme.v1.WorldSpec",
+    m.Observation: "sme.v1.Observation",
+    m.Action: "sme.v1.Action",
+    m.Control: "sme.v1.Control",
+    m.Truth: "sme.v1.Truth",
+    m.Embedding: "sme.v1.Embedding",
+    m.AgentEvent: "sme.v1.AgentEvent",
+    m.AgentStatus: "sme.v1.AgentStatus",
+}
+
+
+def _finite(value: float, what: str) -> float:
+    if not math.isfinite(value):
+        raise errors.NonFiniteValue(f"{what} is {value!r}; only finite numbers are accepted")
+    return value
+
+
+def _tensor_to_pb(name: str, array: np.ndarray, out: pb.Tensor) -> None:
+    a = np.asarray(array)
+    dt = a.dtype.name
+    if dt not in DTYPES:
+        raise errors.BadDtype(f"tensor {name!r}: dtype {dt} is not one of {sorted(DTYPES)}")
+    if a.ndim > MAX_DIMS:
+        raise errors.ShapeMismatch(f"tensor {name!r}: {a.ndim} dimensions, at most {MAX_DIMS}")
+    if a.nbytes > MAX_TENSOR_BYTES:
+        raise errors.OversizeMessage(f"tensor {name!r}: {a.nbytes} bytes, at most {MAX_TENSOR_BYTES}")
+    out.name = name
+    out.dtype = dt
+    out.shape.extend(a.shape)
+    out.data = np.ascontiguousarray(a, dtype=DTYPES[dt]).tobytes()
+
+
+def _tensor_from_pb(t: pb.Tensor, where: str) -> np.ndarray:
+    name = t.name or "?"
+    dt = DTYPES.get(t.dtype)
+    if dt is None:
+        raise errors.BadDtype(f"{where}: tensor {name!r} has dtype {t.dtype!r}; allowed: {sorted(DTYPES)}")
+    shape = tuple(int(s) for s in t.shape)
+    if len(shape) > MAX_DIMS:
+        raise errors.ShapeMismatch(f"{where}: tensor {name!r} has {len(shape)} dimensions, at most {MAX_DIMS}")
+    claimed = math.prod(shape) * dt.itemsize  # Python ints: a huge claim cannot overflow
+    if claimed > MAX_TENSOR_BYTES:
+        raise errors.OversizeMessage(
+            f"{where}: tensor {name!r} claims shape {list(shape)} = {claimed} bytes, at most {MAX_TENSOR_BYTES}"
+        )
+    if claimed != len(t.data):
+        raise errors.ShapeMismatch(
+            f"{where}: tensor {name!r} shape {list(shape)} x {dt.name} needs {claimed} bytes, got {len(t.data)}"
+        )
+    a = np.frombuffer(t.data, dtype=dt).reshape(shape)
+    if dt.kind == "f" and a.size and not np.isfinite(a).all():
+        raise errors.NonFiniteValue(f"{where}: tensor {name!r} contains NaN or inf")
+    return a
+
+
+def _tensors_from_pb(ts: Any, where: str) -> dict[str, np.ndarray]:
+    if len(ts) > MAX_TENSORS:
+        raise errors.OversizeMessage(f"{where}: {len(ts)} tensors, at most {MAX_TENSORS}")
+    out: dict[str, np.ndarray] = {}
+    for t in ts:
+        if t.name in out:
+            raise errors.MalformedMessage(f"{where}: tensor name {t.name!r} appears twice")
+        out[t.name] = _tensor_from_pb(t, where)
+    return out
+
+
+def _tensors_to_pb(tensors: dict[str, np.ndarray], field: Any) -> None:
+    if len(tensors) > MAX_TENSORS:
+        raise errors.OversizeMessage(f"{len(tensors)} tensors, at most {MAX_TENSORS}")
+    for name, a in tensors.items():
+        _tensor_to_pb(name, a, field.add())
+
+
+# --- encoders ---------------------------------------------------------------------------------
+
+
+def _enc_spec(x: m.WorldSpec) -> pb.WorldSpec:
+    p = pb.WorldSpec(
+        schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, reward_min=x.reward_min,
+        reward_max=x.reward_max, program=x.program, n_starts=x.n_starts, session=x.session,
+    )
+    for s in x.sensors:
+        p.sensors.add(name=s.name, dtype=s.dtype, shape=list(s.shape), low=s.low, high=s.high,
+                      description=s.description)
+    a = x.action_space
+    p.action_space.discrete_n = a.n
+    p.action_space.low.extend(a.low)
+    p.action_space.high.extend(a.high)
+    p.action_space.names.extend(a.names)
+    p.params.update(x.params)
+    return p
+
+
+def _enc_obs(x: m.Observation) -> pb.Observation:
+    _finite(float(x.reward), "observation reward")
+    p = pb.Observation(
+        schema_version=m.SCHEMA_VERSION, world_id=x.world_id, episode=x.episode, step=x.step, t=x.t,
+        timestamp=x.timestamp, reward=x.reward, done=x.done, start=x.start, session=x.session,
+    )
+    _tensors_to_pb(x.tensors, p.tensors)
+    return p
+
+
+def _enc_act(x: m.Action) -> pb.Action:
+    for v in x.values:
+        _finite(float(v), "action value")
+    return pb.Action(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, step=x.step,
+                     values=[float(v) for v in x.values], reset=x.reset, start=x.start,
+                     timestamp=x.timestamp)
+
+
+def _enc_ctl(x: m.Control) -> pb.Control:
+    p = pb.Control(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, id=x.id,
+                   timestamp=x.timestamp)
+    p.params.update({k: str(v) for k, v in x.params.items()})
+    return p
+
+
+def _enc_truth(x: m.Truth) -> pb.Truth:
+    p = pb.Truth(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, step=x.step,
+                 timestamp=x.timestamp)
+    _tensors_to_pb(x.tensors, p.tensors)
+    return p
+
+
+def _enc_emb(x: m.Embedding) -> pb.Embedding:
+    p = pb.Embedding(
+        schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, world_id=x.world_id, version=x.version,
+        trigger=x.trigger, ids=list(x.ids), eigenvalues=[float(e) for e in x.eigenvalues],
+        has_procrustes=x.procrustes_error is not None,
+        procrustes_error=float(x.procrustes_error) if x.procrustes_error is not None else 0.0,
+        step=x.step, timestamp=x.timestamp,
+    )
+    _tensor_to_pb("coordinates", np.asarray(x.coordinates, dtype=np.float64), p.coordinates)
+    p.metrics.update({k: float(v) for k, v in x.metrics.items()})
+    return p
+
+
+def _enc_event(x: m.AgentEvent) -> pb.AgentEvent:
+    p = pb.AgentEvent(schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, world_id=x.world_id,
+                      kind=x.kind, detail=x.detail, step=x.step, timestamp=x.timestamp)
+    p.values.update({k: float(v) for k, v in x.values.items()})
+    return p
+
+
+def _enc_status(x: m.AgentStatus) -> pb.AgentStatus:
+    p = pb.AgentStatus(schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, uptime=x.uptime,
+                       timestamp=x.timestamp)
+    for ln in x.links:
+        q = p.links.add(world_id=ln.world_id, kind=ln.kind, program=ln.program, state=ln.state,
+                        steps=ln.steps, episodes=ln.episodes, embedding_version=ln.embedding_version,
+                        reward_mean=ln.reward_mean, last_procrustes_error=ln.last_procrustes_error)
+        q.rejected.update(ln.rejected)
+    p.counters.update(x.counters)
+    return p
+
+
+# --- decoders ---------------------------------------------------------------------------------
+
+
+def _dec_spec(p: pb.WorldSpec) -> m.WorldSpec:
+    sensors = []
+    for s in p.sensors:
+        if s.dtype not in DTYPES:
+            raise errors.BadDtype(f"WorldSpec sensor {s.name!r} has dtype {s.dtype!r}; allowed: {sorted(DTYPES)}")
+        sensors.append(m.SensorSpec(s.name, s.dtype, tuple(s.shape), s.low, s.high, s.description))
+    a = p.action_space
+    if a.discrete_n == 0 and (len(a.low) == 0 or len(a.low) != len(a.high)):
+        raise errors.MalformedMessage("WorldSpec action_space: neither discrete_n > 0 nor matching low/high bounds")
+    return m.WorldSpec(
+        world_id=p.world_id, kind=p.kind, sensors=tuple(sensors),
+        action_space=m.ActionSpace(a.discrete_n, tuple(a.low), tuple(a.high), tuple(a.names)),
+        reward_min=p.reward_min, reward_max=p.reward_max, program=p.program, n_starts=p.n_starts,
+        params=dict(p.params), session=p.session,
+    )
+
+
+def _dec_obs(p: pb.Observation) -> m.Observation:
+    where = f"Observation(world={p.world_id!r}, step={p.step})"
+    return m.Observation(
+        world_id=p.world_id, episode=p.episode, step=p.step, t=p.t,
+        tensors=_tensors_from_pb(p.tensors, where), reward=_finite(p.reward, f"{where} reward"),
+        done=p.done, start=p.start, timestamp=p.timestamp, session=p.session,
+    )
+
+
+def _dec_act(p: pb.Action) -> m.Action:
+    if len(p.values) > MAX_TENSORS:
+        raise errors.OversizeMessage(f"Action has {len(p.values)} values, at most {MAX_TENSORS}")
+    vals = tuple(_finite(v, f"Action(step={p.step}) value") for v in p.values)
+    return m.Action(p.world_id, p.step, vals, p.reset, p.start, p.timestamp)
+
+
+def _dec_ctl(p: pb.Control) -> m.Control:
+    return m.Control(p.world_id, p.kind, dict(p.params), p.id, p.timestamp)
+
+
+def _dec_truth(p: pb.Truth) -> m.Truth:
+    return m.Truth(p.world_id, p.kind, _tensors_from_pb(p.tensors, "Truth"), p.step, p.timestamp)
+
+
+def _dec_emb(p: pb.Embedding) -> m.Embedding:
+    coords = _tensor_from_pb(p.coordinates, "Embedding")
+    return m.Embedding(
+        agent_id=p.agent_id, world_id=p.world_id, version=p.version, trigger=p.trigger, ids=tuple(p.ids),
+        coordinates=coords, eigenvalues=tuple(p.eigenvalues),
+        procrustes_error=p.procrustes_error if p.has_procrustes else None, step=p.step,
+        timestamp=p.timestamp, metrics=dict(p.metrics),
+    )
+
+
+def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:
+    return m.AgentEvent(p.agent_id, p.world_id, p.kind, p.detail, p.step, p.timestamp, dict(p.values))
+
+
+def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
+    links = tuple(
+        m.LinkStatus(ln.world_id, ln.kind, ln.program, ln.state, ln.steps, ln.episodes,
+                     ln.embedding_version, ln.reward_mean, dict(ln.rejected), ln.last_procrustes_error)
+        for ln in p.links
+    )
+    return m.AgentStatus(p.agent_id, p.uptime, links, dict(p.counters), p.timestamp)
+
+
+_CODECS: dict[type, tuple[type, Callable[[Any], Any], Callable[[Any], Any]]] = {
+    m.WorldSpec: (pb.WorldSpec, _enc_spec, _dec_spec),
+    m.Observation: (pb.Observation, _enc_obs, _dec_obs),
+    m.Action: (pb.Action, _enc_act, _dec_act),
+    m.Control: (pb.Control, _enc_ctl, _dec_ctl),
+    m.Truth: (pb.Truth, _enc_truth, _dec_truth),
+    m.Embedding: (pb.Embedding, _enc_emb, _dec_emb),
+    m.AgentEvent: (pb.AgentEvent, _enc_event, _dec_event),
+    m.AgentStatus: (pb.AgentStatus, _enc_status, _dec_status),
+}
+
+
+def encode(msg: Any) -> bytes:
+    """Serialise one of the message dataclasses (validated like a decode would be)."""
+    try:
+        _, enc, _ = _CODECS[type(msg)]
+    except KeyError:
+        raise TypeError(f"not a protocol message: {type(msg).__name__}") from None
+    data = enc(msg).SerializeToString()
+    if len(data) > MAX_MESSAGE_BYTES:
+        raise errors.OversizeMessage(f"{type(msg).__name__}: {len(data)} bytes, at most {MAX_MESSAGE_BYTES}")
+    return data
+
+
+def decode(cls: type, payload: bytes | bytearray | memoryview) -> Any:
+    """Parse and validate bytes as message class `cls` (one of the `messages` dataclasses)."""
+    pbcls, _, dec = _CODECS[cls]
+    name = cls.__name__
+    if len(payload) > MAX_MESSAGE_BYTES:
+        raise errors.OversizeMessage(f"{name}: {len(payload)} bytes, at most {MAX_MESSAGE_BYTES}")
+    p = pbcls()
+    try:
+        p.ParseFromString(bytes(payload))
+    except (DecodeError, RuntimeError, ValueError) as e:
+        raise errors.MalformedMessage(f"{name}: not a valid protobuf message ({e})") from None
+    if p.schema_version != m.SCHEMA_VERSION:
+        raise errors.UnknownVersion(
+            f"{name}: schema version {p.schema_version}, this build speaks version {m.SCHEMA_VERSION}"
+            + (" (0 usually means the bytes are not an sme message)" if p.schema_version == 0 else "")
+        )
+    return dec(p)
+
+
+def schema_name(cls: type) -> str:
+    return SCHEMA_NAMES[cls]
+
+
+def file_descriptor_set() -> bytes:
+    """The serialized FileDescriptorSet of the schema, for MCAP schema records."""
+    from google.protobuf import descriptor_pb2
+
+    fds = descriptor_pb2.FileDescriptorSet()
+    pb.DESCRIPTOR.CopyToProto(fds.file.add())
+    return fds.SerializeToString()

@@ -1,0 +1,229 @@
+"""Serve any World over the bus, in lockstep.
+
+The node publishes observation k and waits for the Action that answers k; after `resend` seconds
+without one it publishes observation k again, and keeps waiting (forever, or until stopped). It
+declares a liveliness token (discovery), a spec queryable, a truth queryable, and a control
+subscriber; controls are applied between steps on the node's own thread, so worlds need no locks.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+import signal
+import threading
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from protocol import codec, keys
+from protocol.bus import Bus, BusMessage
+from protocol.errors import ProtocolError
+from protocol.messages import Action, Control, Observation, WorldSpec
+from worlds.base import PerturbationError, StepResult, World
+
+log = logging.getLogger("sme.world")
+
+
+@dataclass
+class NodeStats:
+    steps: int = 0
+    episodes: int = 0
+    resends: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+    controls: int = 0
+    latencies: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+
+    def summary(self) -> dict:
+        lat = np.asarray(self.latencies) * 1e3
+        out = {"steps": self.steps, "episodes": self.episodes, "resends": self.resends,
+               "controls": self.controls, "rejected": dict(self.rejected), "seconds": round(self.seconds, 3),
+               "steps_per_s": round(self.steps / self.seconds, 1) if self.seconds else 0.0}
+        if lat.size:
+            out.update(p50_ms=round(float(np.percentile(lat, 50)), 4),
+                       p99_ms=round(float(np.percentile(lat, 99)), 4))
+        return out
+
+
+class _ActionSlot:
+    """The latest action answering the step the node waits for (older answers are ignored)."""
+
+    def __init__(self) -> None:
+        self._cv = threading.Condition()
+        self.want = -1
+        self.action: Action | None = None
+
+    def expect(self, step: int) -> None:
+        with self._cv:
+            self.want = step
+            self.action = None
+
+    def offer(self, action: Action) -> None:
+        with self._cv:
+            if action.step == self.want and self.action is None:
+                self.action = action
+                self._cv.notify()
+
+    def wait(self, timeout: float) -> Action | None:
+        with self._cv:
+            if self.action is None:
+                self._cv.wait(timeout)
+            return self.action
+
+    def wake(self) -> None:
+        with self._cv:
+            self._cv.notify_all()
+
+
+class WorldNode:
+    """Runs one World on a Bus until stopped or a bound (`max_steps`, `seconds`) is reached."""
+
+    def __init__(self, world: World, bus: Bus, world_id: str | None = None, *, resend: float = 0.5,
+                 max_steps: int | None = None, seconds: float | None = None, measure: bool = False) -> None:
+        self.world = world
+        self.bus = bus
+        self.world_id = keys.check_id(world_id or world.world_id, "world id")
+        self.resend = resend
+        self.max_steps = max_steps
+        self.seconds = seconds
+        self.measure = measure
+        self.session = secrets.token_hex(6)
+        self.stats = NodeStats()
+        self.stop_event = threading.Event()
+        self._slot = _ActionSlot()
+        self._controls: list[Control] = []
+        self._ctl_lock = threading.Lock()
+        self._spec = replace(world.spec(), world_id=self.world_id, session=self.session)
+        self._truth_bytes: bytes | None = None
+        self._refresh_truth()
+
+    # bus callbacks (zenoh threads) -------------------------------------------------------------
+    def _reject(self, kind: str, msg: str) -> None:
+        self.stats.rejected[kind] = self.stats.rejected.get(kind, 0) + 1
+        log.warning("world %s: rejected input: %s", self.world_id, msg)
+
+    def _on_action(self, msg: BusMessage) -> None:
+        try:
+            act = codec.decode(Action, msg.payload)
+        except ProtocolError as e:
+            self._reject(e.kind, str(e))
+            return
+        self._slot.offer(act)
+
+    def _on_control(self, msg: BusMessage) -> None:
+        try:
+            ctl = codec.decode(Control, msg.payload)
+        except ProtocolError as e:
+            self._reject(e.kind, str(e))
+            return
+        with self._ctl_lock:
+            self._controls.append(ctl)
+
+    def _refresh_truth(self) -> None:
+        tr = self.world.truth()
+        self._truth_bytes = None if tr is None else codec.encode(replace(tr, world_id=self.world_id,
+                                                                        timestamp=time.time()))
+
+    def _answer_truth(self, key: str, payload: bytes | None) -> bytes:
+        if self._truth_bytes is None:
+            raise ValueError(f"world {self.world_id} has no ground truth")
+        return self._truth_bytes
+
+    # main loop ---------------------------------------------------------------------------------
+    def _apply_controls(self) -> None:
+        with self._ctl_lock:
+            todo, self._controls = self._controls, []
+        for ctl in todo:
+            try:
+                what = self.world.perturb(ctl)
+                self.stats.controls += 1
+                log.info("world %s: %s", self.world_id, what)
+                self._refresh_truth()
+                if self._truth_bytes is not None:
+                    self.bus.put(keys.world_truth(self.world_id), self._truth_bytes, codec.schema_name(type(self.world.truth())))
+            except (PerturbationError, ValueError) as e:
+                self._reject("bad_control", f"control {ctl.kind!r}: {e}")
+
+    def _publish(self, pub, step: int, episode: int, t: int, res: StepResult, start: int) -> bytes:
+        obs = Observation(self.world_id, episode, step, t, res.tensors, float(res.reward), bool(res.done),
+                          start, time.time(), self.session)
+        data = codec.encode(obs)
+        pub.put(data)
+        return data
+
+    def install_signal_handlers(self) -> None:
+        def stop(signum, frame):  # noqa: ARG001
+            self.stop_event.set()
+            self._slot.wake()
+
+        signal.signal(signal.SIGINT, stop)
+        signal.signal(signal.SIGTERM, stop)
+
+    def stop(self) -> None:
+        self.stop_event.set()
+        self._slot.wake()
+
+    def run(self) -> NodeStats:
+        wid = self.world_id
+        spec_bytes = codec.encode(self._spec)
+        bus = self.bus
+        bus.queryable(keys.world_spec(wid), lambda k, p: spec_bytes, codec.schema_name(WorldSpec))
+        from protocol.messages import Truth
+        bus.queryable(keys.world_truth(wid), self._answer_truth, codec.schema_name(Truth))
+        bus.subscribe(keys.world_act(wid), self._on_action)
+        bus.subscribe(keys.world_ctl(wid), self._on_control)
+        pub = bus.publisher(keys.world_obs(wid), codec.schema_name(Observation))
+        bus.token(keys.alive_world(wid))
+        log.info("world %s (%s) serving on the bus, session %s", wid, self.world.kind, self.session)
+
+        t0 = time.perf_counter()
+        step, episode, start = 0, 0, -1
+        res = self.world.reset(start=None)
+        t = 0
+        self._slot.expect(step)
+        data = self._publish(pub, step, episode, t, res, start)
+        sent = time.perf_counter()
+        while not self.stop_event.is_set():
+            act = self._slot.wait(self.resend)
+            if act is None:
+                if self.stop_event.is_set():
+                    break
+                self.stats.resends += 1
+                pub.put(data)  # the same bytes: receivers can tell a resend by its step
+                continue
+            if self.measure:
+                self.stats.latencies.append(time.perf_counter() - sent)
+            self._apply_controls()
+            if res.done or act.reset:
+                start = act.start if act.start >= 0 else -1
+                try:
+                    res = self.world.reset(start=None if start < 0 else start)
+                except ValueError as e:
+                    self._reject("bad_action", str(e))
+                    start = -1
+                    res = self.world.reset(start=None)
+                episode += 1
+                self.stats.episodes += 1
+                t = 0
+            else:
+                try:
+                    res = self.world.step(np.asarray(act.values, dtype=np.float64))
+                    t += 1
+                except ValueError as e:
+                    self._reject("bad_action", f"step {act.step}: {e}")
+                    # keep waiting for a valid answer to the same observation
+                    self._slot.expect(step)
+                    continue
+            step += 1
+            self.stats.steps += 1
+            self._slot.expect(step)
+            data = self._publish(pub, step, episode, t, res, start)
+            sent = time.perf_counter()
+            if self.max_steps is not None and self.stats.steps >= self.max_steps:
+                break
+            if self.seconds is not None and time.perf_counter() - t0 >= self.seconds:
+                break
+        self.stats.seconds = time.perf_counter() - t0
+        return self.stats

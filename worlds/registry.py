@@ -1,0 +1,39 @@
+"""World kinds by name, so that `sme world NAME` and the demo can build them."""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Mapping
+
+from worlds.base import World
+
+
+def _gridworld(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
+    from worlds.gridworld import GridWorld
+
+    return GridWorld.from_params(world_id, seed, params)
+
+
+def _gridworld_barrier(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
+    return _gridworld(world_id, seed, {**params, "barrier": "true"})
+
+
+def _bench(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
+    from worlds.bench import BenchWorld
+
+    return BenchWorld.from_params(world_id, seed, params)
+
+
+WORLDS: dict[str, Callable[[str, int, Mapping[str, Any]], World]] = {
+    "gridworld": _gridworld,
+    "gridworld-barrier": _gridworld_barrier,
+    "bench": _bench,
+}
+
+
+def make_world(name: str, world_id: str | None = None, seed: int = 0,
+               params: Mapping[str, Any] | None = None) -> World:
+    try:
+        factory = WORLDS[name]
+    except KeyError:
+        raise ValueError(f"unknown world {name!r}; known: {', '.join(sorted(WORLDS))}") from None
+    return factory(world_id or name, seed, dict(params or {}))
