@@ -261,7 +261,7 @@ class Bus:
                 reply = handler(str(query.key_expr), payload)
                 query.reply(query.key_expr, reply, encoding=enc)
             except Exception as e:
-                log.warning("queryable %s: %s", key, e)
+                (log.debug if isinstance(e, LookupError) else log.warning)("queryable %s: %s", key, e)
                 try:
                     query.reply_err(str(e).encode())
                 except Exception:  # pragma: no cover

@@ -35,12 +35,16 @@ class NodeStats:
     controls: int = 0
     latencies: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    measured_seconds: float = 0.0
+    measured_steps: int = 0
 
     def summary(self) -> dict:
         lat = np.asarray(self.latencies) * 1e3
         out = {"steps": self.steps, "episodes": self.episodes, "resends": self.resends,
                "controls": self.controls, "rejected": dict(self.rejected), "seconds": round(self.seconds, 3),
                "steps_per_s": round(self.steps / self.seconds, 1) if self.seconds else 0.0}
+        if self.measured_seconds:
+            out["steady_steps_per_s"] = round(self.measured_steps / self.measured_seconds, 1)
         if lat.size:
             out.update(p50_ms=round(float(np.percentile(lat, 50)), 4),
                        p99_ms=round(float(np.percentile(lat, 99)), 4))
@@ -81,7 +85,8 @@ class WorldNode:
     """Runs one World on a Bus until stopped or a bound (`max_steps`, `seconds`) is reached."""
 
     def __init__(self, world: World, bus: Bus, world_id: str | None = None, *, resend: float = 0.5,
-                 max_steps: int | None = None, seconds: float | None = None, measure: bool = False) -> None:
+                 max_steps: int | None = None, seconds: float | None = None, measure: bool = False,
+                 warmup: int = 0) -> None:
         self.world = world
         self.bus = bus
         self.world_id = keys.check_id(world_id or world.world_id, "world id")
@@ -89,6 +94,7 @@ class WorldNode:
         self.max_steps = max_steps
         self.seconds = seconds
         self.measure = measure
+        self.warmup = warmup
         self.session = secrets.token_hex(6)
         self.stats = NodeStats()
         self.stop_event = threading.Event()
@@ -128,7 +134,7 @@ class WorldNode:
 
     def _answer_truth(self, key: str, payload: bytes | None) -> bytes:
         if self._truth_bytes is None:
-            raise ValueError(f"world {self.world_id} has no ground truth")
+            raise LookupError(f"world {self.world_id} has no ground truth")
         return self._truth_bytes
 
     # main loop ---------------------------------------------------------------------------------
@@ -179,6 +185,7 @@ class WorldNode:
         log.info("world %s (%s) serving on the bus, session %s", wid, self.world.kind, self.session)
 
         t0 = time.perf_counter()
+        t_warm: float | None = None
         step, episode, start = 0, 0, -1
         res = self.world.reset(start=None)
         t = 0
@@ -193,8 +200,12 @@ class WorldNode:
                 self.stats.resends += 1
                 pub.put(data)  # the same bytes: receivers can tell a resend by its step
                 continue
-            if self.measure:
-                self.stats.latencies.append(time.perf_counter() - sent)
+            if self.measure and self.stats.steps >= self.warmup:
+                now = time.perf_counter()
+                self.stats.latencies.append(now - sent)
+                if t_warm is None:
+                    t_warm = now
+                self.stats.measured_steps += 1
             self._apply_controls()
             if res.done or act.reset:
                 start = act.start if act.start >= 0 else -1
@@ -225,5 +236,8 @@ class WorldNode:
                 break
             if self.seconds is not None and time.perf_counter() - t0 >= self.seconds:
                 break
-        self.stats.seconds = time.perf_counter() - t0
+        end = time.perf_counter()
+        self.stats.seconds = end - t0
+        if t_warm is not None:
+            self.stats.measured_seconds = end - t_warm
         return self.stats

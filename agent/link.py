@@ -1,0 +1,191 @@
+"""One world link: decodes and checks the world's observations, runs its program, answers with
+actions, scores and publishes embeddings and events. `handle()` is called for each observation,
+either straight from the bus callback or (threaded mode, `start()`) from the link's own thread fed
+by a bounded inbox."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from agent.evaluation import score_embedding
+from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from protocol import codec
+from protocol.bus import Inbox
+from protocol.errors import ProtocolError, SpecMismatch
+from protocol.messages import Action, AgentEvent, Embedding, LinkStatus, Observation, Truth, WorldSpec
+
+log = logging.getLogger("sme.agent")
+
+Publish = Callable[[str, Any], None]  # (channel "act"|"embedding"|"event", message)
+
+
+def check_against_spec(obs: Observation, spec: WorldSpec) -> None:
+    """Raise SpecMismatch if the observation lacks a sensor the spec declares, or has it with
+    another dtype or shape."""
+    for s in spec.sensors:
+        a = obs.tensors.get(s.name)
+        if a is None:
+            raise SpecMismatch(f"observation step {obs.step} has no tensor {s.name!r} (spec declares it)")
+        if a.dtype.name != s.dtype or tuple(a.shape) != tuple(s.shape):
+            raise SpecMismatch(f"observation step {obs.step}: tensor {s.name!r} is {a.dtype.name}{list(a.shape)}, "
+                               f"spec says {s.dtype}{list(s.shape)}")
+
+
+@dataclass
+class LinkCounters:
+    steps: int = 0
+    episodes: int = 0
+    duplicates: int = 0
+    stale: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+    embeddings: int = 0
+    reward_mean: float = 0.0
+    last_error: float = float("nan")
+
+
+class WorldLink:
+    REWARD_EMA = 0.01
+    EVENT_RATE = 5.0  # bad-input events per second at most; counters count everything
+
+    def __init__(self, agent_id: str, spec: WorldSpec, program: Program, publish: Publish,
+                 inbox_size: int = 256) -> None:
+        self.agent_id = agent_id
+        self.spec = spec
+        self.world_id = spec.world_id
+        self.program = program
+        self.publish = publish
+        self.inbox = Inbox(inbox_size)
+        self.truth: Truth | None = None
+        self.counters = LinkCounters()
+        self.version = 0
+        self.state = "attached"
+        self.session = spec.session
+        self.lock = threading.RLock()  # held while the program runs: checkpoints take it too
+        self._last_step = -1
+        self._last_action: Action | None = None
+        self._event_budget = self.EVENT_RATE
+        self._event_clock = time.monotonic()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # lifecycle ---------------------------------------------------------------------------------
+    def start(self) -> None:
+        if self._thread is None or not self._thread.is_alive():
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name=f"link-{self.world_id}", daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.inbox.close()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+    def pause(self) -> None:
+        self.state = "paused"
+
+    def resume(self, spec: WorldSpec) -> None:
+        with self.lock:
+            if spec.session != self.session:
+                self.session = spec.session
+                self._last_step = -1
+                self._last_action = None
+                self.program.world_restarted()
+            self.spec = spec
+            self.state = "attached"
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            msg = self.inbox.get(0.2)
+            if msg is not None:
+                self.handle(msg.payload)
+
+    # one observation ---------------------------------------------------------------------------
+    def reject(self, kind: str, detail: str, step: int = 0) -> None:
+        c = self.counters.rejected
+        c[kind] = c.get(kind, 0) + 1
+        log.warning("world %s: rejected input (%s): %s", self.world_id, kind, detail)
+        now = time.monotonic()
+        self._event_budget = min(self.EVENT_RATE, self._event_budget + (now - self._event_clock) * self.EVENT_RATE)
+        self._event_clock = now
+        if self._event_budget >= 1.0:
+            self._event_budget -= 1.0
+            self.event("bad_input", f"{kind}: {detail}", step, {"count": float(c[kind])})
+
+    def event(self, kind: str, detail: str, step: int = 0, values: dict[str, float] | None = None) -> None:
+        self.publish("event", AgentEvent(self.agent_id, self.world_id, kind, detail, step, time.time(),
+                                         dict(values or {})))
+
+    def handle(self, payload: bytes) -> Action | None:
+        """Decode, check and answer one observation payload; returns the action sent (if any)."""
+        try:
+            obs = codec.decode(Observation, payload)
+            if obs.world_id != self.world_id:
+                raise SpecMismatch(f"observation for world {obs.world_id!r} arrived on {self.world_id!r}'s key")
+            check_against_spec(obs, self.spec)
+        except ProtocolError as e:
+            self.reject(e.kind, str(e))
+            return None
+        with self.lock:
+            return self._answer(obs)
+
+    def _answer(self, obs: Observation) -> Action | None:
+        if obs.session != self.session:
+            self.session = obs.session
+            self._last_step = -1
+            self._last_action = None
+            self.program.world_restarted()
+        if obs.step == self._last_step and self._last_action is not None:
+            self.counters.duplicates += 1  # a resend: answer again, learn nothing twice
+            self.publish("act", self._last_action)
+            return self._last_action
+        if obs.step < self._last_step:
+            self.counters.stale += 1
+            return None
+        try:
+            dec = self.program.act(obs)
+        except ProtocolError as e:
+            self.reject(e.kind, str(e), obs.step)
+            return None
+        except Exception as e:  # a program bug must not kill the link or lose what it learned
+            log.exception("program %s failed on world %s step %d", self.program.name, self.world_id, obs.step)
+            self.event("program_error", f"{type(e).__name__}: {e}", obs.step)
+            dec = Decision(reset=True, start=-1)
+        act = Action(self.world_id, obs.step, tuple(float(v) for v in dec.values), dec.reset, dec.start, time.time())
+        self._last_step, self._last_action = obs.step, act
+        self.publish("act", act)
+        c = self.counters
+        c.steps += 1
+        if obs.t == 0:
+            c.episodes += 1
+        c.reward_mean += self.REWARD_EMA * (obs.reward - c.reward_mean)
+        for item in self.program.drain():
+            self._emit(item)
+        return act
+
+    def _emit(self, item: Any) -> None:
+        if isinstance(item, EmbeddingOutput):
+            err = score_embedding(item, self.truth)
+            self.version += 1
+            self.counters.embeddings += 1
+            if err is not None:
+                self.counters.last_error = err
+            emb = Embedding(self.agent_id, self.world_id, self.version, item.trigger, item.ids,
+                            np.asarray(item.coordinates, dtype=np.float64), item.eigenvalues, err, item.step,
+                            time.time(), dict(item.metrics))
+            log.info("world %s: embedding v%d (%s) n=%d error=%s", self.world_id, self.version, item.trigger,
+                     len(item.ids), "n/a" if err is None else f"{err:.4f}")
+            self.publish("embedding", emb)
+        elif isinstance(item, EventOutput):
+            self.event(item.kind, item.detail, item.step, item.values)
+
+    def status(self) -> LinkStatus:
+        c = self.counters
+        return LinkStatus(self.world_id, self.spec.kind, self.program.name, self.state, c.steps, c.episodes,
+                          self.version, c.reward_mean, dict(c.rejected), c.last_error)

@@ -1,0 +1,14 @@
+"""`sme bench`: the benchmarks."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="benchmarks (loop)", description="Run a benchmark; see its --help.")
+    bsub = p.add_subparsers(dest="bench", metavar="BENCH")
+    from tools.bench import loop
+
+    loop.add_parser(bsub)
+    p.set_defaults(func=lambda a: p.print_help() or 2)

@@ -1,0 +1,86 @@
+"""`sme watch`: print embedding versions and agent events as they arrive."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+
+from protocol import codec, keys
+from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from protocol.errors import ProtocolError
+from protocol.messages import AgentEvent, Embedding
+from tools.common import embedding_dict, event_dict, format_embedding, format_event, print_json
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("watch", help="print embedding versions and agent events as they arrive",
+                       description="Subscribe to the agent's embeddings and events and print them. Waits for "
+                       "the agent if it is not up yet. Exit status 1 if --timeout passes before --count "
+                       "embeddings arrived.")
+    p.add_argument("--json", action="store_true",
+                   help="one JSON object per line: embeddings carry world, version, trigger, n_points, dims, "
+                   "eigenvalues, procrustes_error, step, metrics; events carry kind and detail")
+    p.add_argument("--coords", action="store_true", help="include ids and coordinates in --json output")
+    p.add_argument("--count", type=int, default=None, metavar="N", help="exit after N embeddings")
+    p.add_argument("--timeout", type=float, default=None, metavar="S", help="exit after S seconds")
+    p.add_argument("--agent", default="*", help="agent id to watch (default: all)")
+    p.add_argument("--world", default="*", help="world id to watch (default: all)")
+    p.add_argument("--no-events", action="store_true", help="embeddings only")
+    add_bus_arguments(p, "world")
+    p.set_defaults(func=main_args)
+
+
+def main_args(args: argparse.Namespace) -> int:
+    try:
+        bus = Bus(bus_config_from_args(args, "world"))
+    except BusError as e:
+        print(f"sme watch: {e}", file=sys.stderr)
+        return 2
+    done = threading.Event()
+    seen = [0]
+    lock = threading.Lock()
+
+    def on_embedding(msg):
+        try:
+            e = codec.decode(Embedding, msg.payload)
+        except ProtocolError as err:
+            print(f"sme watch: skipped a bad embedding message on {msg.key}: {err}", file=sys.stderr)
+            return
+        with lock:
+            if done.is_set():
+                return
+            print_json(embedding_dict(e, args.coords)) if args.json else print(format_embedding(e), flush=True)
+            seen[0] += 1
+            if args.count is not None and seen[0] >= args.count:
+                done.set()
+
+    def on_event(msg):
+        try:
+            e = codec.decode(AgentEvent, msg.payload)
+        except ProtocolError as err:
+            print(f"sme watch: skipped a bad event message on {msg.key}: {err}", file=sys.stderr)
+            return
+        with lock:
+            if not done.is_set():
+                print_json(event_dict(e)) if args.json else print(format_event(e), flush=True)
+
+    signal.signal(signal.SIGINT, lambda *a: done.set())
+    signal.signal(signal.SIGTERM, lambda *a: done.set())
+    with bus:
+        bus.subscribe(f"{keys.PREFIX}/agent/{args.agent}/embedding/{args.world}", on_embedding)
+        if not args.no_events:
+            bus.subscribe(f"{keys.PREFIX}/agent/{args.agent}/event/{args.world}", on_event)
+        deadline = None if args.timeout is None else time.monotonic() + args.timeout
+        while not done.is_set():
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            done.wait(0.1)
+        done.set()
+    if args.count is not None and seen[0] < args.count:
+        print(f"sme watch: timed out after {args.timeout} s with {seen[0]} of {args.count} embeddings",
+              file=sys.stderr)
+        return 1
+    return 0

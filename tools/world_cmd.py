@@ -1,0 +1,62 @@
+"""`sme world NAME`: serve a world simulator on the bus."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+
+from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from tools.common import add_verbosity, parse_params, setup_logging, verbosity
+from worlds.node import WorldNode
+from worlds.registry import WORLDS, make_world
+
+log = logging.getLogger("sme.world")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("world", help="attach a world simulator",
+                       description="Serve a world on the bus in lockstep: publish observation k, wait for the "
+                       "agent's action k (resend after --resend seconds, then keep waiting). The agent "
+                       "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ". "
+                       "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.")
+    p.add_argument("name", help="world kind: " + ", ".join(sorted(WORLDS)))
+    p.add_argument("--id", default=None, help="world id (default: the world name)")
+    p.add_argument("--param", action="append", metavar="K=V",
+                   help="world parameter, repeatable (gridworld: size=9 barrier=true actions=4|8 goal=x,y)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the world's random generator")
+    p.add_argument("--resend", type=float, default=0.5, metavar="S",
+                   help="republish an unanswered observation after S seconds (default 0.5)")
+    p.add_argument("--steps", type=int, default=None, help="stop after this many steps")
+    p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--stats-json", default=None, metavar="FILE",
+                   help="write loop statistics (steps, steps/s, round-trip p50/p99) as JSON when done")
+    p.add_argument("--warmup", type=int, default=200, help="steps excluded from latency statistics")
+    add_bus_arguments(p, "world")
+    add_verbosity(p)
+    p.set_defaults(func=main_args)
+
+
+def main_args(args: argparse.Namespace) -> int:
+    setup_logging(verbosity(args))
+    try:
+        world = make_world(args.name, args.id, args.seed, parse_params(args.param))
+    except ValueError as e:
+        log.error("%s", e)
+        return 2
+    try:
+        bus = Bus(bus_config_from_args(args, "world"))
+    except BusError as e:
+        log.error("%s", e)
+        return 2
+    with bus, world:
+        node = WorldNode(world, bus, args.id or args.name, resend=args.resend, max_steps=args.steps,
+                         seconds=args.seconds, measure=args.stats_json is not None, warmup=args.warmup)
+        node.install_signal_handlers()
+        stats = node.run()
+    summary = stats.summary()
+    log.info("world %s stopped: %s", node.world_id, summary)
+    if args.stats_json:
+        with open(args.stats_json, "w") as f:
+            json.dump(summary, f)
+    return 0
