@@ -47,6 +47,8 @@ class GridworldProgram(Program):
         self._start = 0
         self._traces: list[list[int]] = []
         self._trace: list[int] = []
+        self._seen: set[tuple[int, int]] = set()
+        self._reached = 0
 
     # helpers -----------------------------------------------------------------------------------
     def _state(self, obs: Observation) -> int:
@@ -65,7 +67,7 @@ class GridworldProgram(Program):
         D = trace_distances(self._traces, kind="edit", substitution_cost=self.substitution_cost)
         mds = classical_mds(D, self.dims)
         self.version += 1
-        reached = sum(1 for tr in self._traces if len(tr) < self.max_trace)
+        reached = self._reached
         trigger = "random_policy" if self.policy == "random" else f"policy_iteration {self.lspi.iterations}"
         self.emit(EmbeddingOutput(
             trigger=trigger, ids=tuple(range(len(self._traces))), coordinates=mds.coordinates,
@@ -92,6 +94,7 @@ class GridworldProgram(Program):
                                           obs.step, {"weight_change": change,
                                                      "samples": float(self.lspi.n_samples)}))
                 self.phase, self._start, self._traces, self._trace = "embed", 0, [], []
+                self._reached, self._seen = 0, set()
                 return Decision(reset=True, start=0)
             if obs.done:
                 return Decision(reset=True, start=-1)
@@ -102,15 +105,22 @@ class GridworldProgram(Program):
         # phase == "embed": run the greedy policy from start state self._start
         if obs.t == 0 and obs.start != self._start:
             return Decision(reset=True, start=self._start)  # e.g. the world restarted mid-episode
-        if obs.done or len(self._trace) >= self.max_trace:
+        prev = self._trace[-1] if self._trace else -1
+        # The greedy policy is a deterministic function of (state, previous action): a repeat is a
+        # cycle that never reaches the goal, so the trace ends there.
+        cycle = self.policy == "lspi" and (s, prev) in self._seen
+        if obs.done or cycle or len(self._trace) >= self.max_trace:
+            self._reached += int(obs.done and obs.reward > 0 or (obs.done and not self._trace))
             self._traces.append(self._trace)
             self._trace = []
+            self._seen = set()
             self._start += 1
             if self._start < self.spec.n_starts:
                 return Decision(reset=True, start=self._start)
             self._finish_embedding(obs.step)
             self.phase = "explore"
             return Decision(reset=True, start=-1)
+        self._seen.add((s, prev))
         a = self._choose(s)
         self._trace.append(a)
         return Decision((float(a),))
@@ -118,3 +128,4 @@ class GridworldProgram(Program):
     def world_restarted(self) -> None:
         self._prev = None
         self._trace = []
+        self._seen = set()
