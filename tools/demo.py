@@ -26,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "Stops after --seconds or Ctrl-C.")
     p.add_argument("--world", default="gridworld", help="world to run: " + ", ".join(sorted(WORLDS)))
     p.add_argument("--param", action="append", metavar="K=V", help="world parameter, repeatable (e.g. barrier=true)")
-    p.add_argument("--seconds", type=float, default=20.0, help="run time in seconds (default 20)")
+    p.add_argument("--seconds", type=float, default=15.0, help="run time in seconds (default 15)")
     p.add_argument("--seed", type=int, default=0, help="seed of world and agent")
     p.add_argument("--listen", default=keys.DEFAULT_ENDPOINT, metavar="ENDPOINT",
                    help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT})")
@@ -44,6 +44,7 @@ def main_args(args: argparse.Namespace) -> int:
         return 2
     wid = world.world_id
     last: dict[str, Any] = {}
+    errors: list[float] = []
     t0 = time.monotonic()
 
     def on_output(channel: str, msg: Any) -> None:
@@ -51,7 +52,9 @@ def main_args(args: argparse.Namespace) -> int:
         if isinstance(msg, Embedding):
             last["embedding"] = msg
             print(stamp + format_embedding(msg), flush=True)
-        elif isinstance(msg, AgentEvent) and msg.kind not in ("policy_iteration",):
+            if msg.procrustes_error is not None:
+                errors.append(msg.procrustes_error)
+        elif isinstance(msg, AgentEvent) and msg.kind not in ("policy_iteration", "paused"):
             print(stamp + format_event(msg), flush=True)
 
     try:
@@ -100,4 +103,6 @@ def main_args(args: argparse.Namespace) -> int:
     err = "n/a" if emb.procrustes_error is None else f"{emb.procrustes_error:.4f}"
     print(f"  final embedding v{emb.version} ({emb.trigger}): {emb.coordinates.shape[0]} points in "
           f"{emb.coordinates.shape[1]}-D, Procrustes error against truth {err}")
+    if len(errors) > 1:
+        print(f"  Procrustes error fell from {errors[0]:.4f} (v1) to {min(errors):.4f} (best) as the agent learned")
     return 0

@@ -1,0 +1,144 @@
+"""Over real zenoh on loopback: separate processes, free ports, no multicast."""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from protocol import codec, keys
+from protocol import sme_v1_pb2 as pb
+from protocol.bus import Bus, BusConfig, BusError
+from protocol.messages import AgentEvent, AgentStatus, Observation
+from tests.conftest import wait_for
+
+pytestmark = pytest.mark.integration
+
+
+def status(ep: str) -> AgentStatus | None:
+    try:
+        with Bus(BusConfig.for_role("tool", ep)) as bus:
+            r = bus.get(keys.agent_status("a0"), timeout=2.0)
+            return codec.decode(AgentStatus, r[0].payload) if r else None
+    except BusError:
+        return None  # the agent is not up (yet)
+
+
+def link(st: AgentStatus | None, wid: str):
+    if st is None:
+        return None
+    return next((ln for ln in st.links if ln.world_id == wid), None)
+
+
+def read_json_lines(proc, n, timeout):
+    out, end = [], time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < end:
+        line = proc.stdout.readline()
+        if not line:
+            if proc.poll() is not None:
+                break
+            continue
+        out.append(json.loads(line))
+    return out
+
+
+def test_three_shells_embeddings_arrive_and_improve_and_world_restart_resumes(procs, endpoint):
+    agent = procs.start("agent", "--listen", endpoint, "-q")
+    world = procs.start("world", "gridworld", "--id", "g1", "--connect", endpoint, "-q")
+    watch = procs.start("watch", "--json", "--no-events", "--count", "9", "--timeout", "90", "--connect", endpoint)
+    rows = read_json_lines(watch, 9, 100)
+    assert len(rows) == 9, rows
+    for r in rows:
+        assert {"world", "version", "trigger", "n_points", "dims", "eigenvalues", "procrustes_error"} <= set(r)
+        assert r["world"] == "g1" and r["n_points"] == 81 and r["dims"] == 2
+    assert [r["version"] for r in rows] == list(range(1, 10))
+    errs = [r["procrustes_error"] for r in rows]
+    assert errs[0] > 0.5 and min(errs[-2:]) < 0.05, errs
+
+    # kill the world: the link pauses; start it again: the daemon re-attaches and carries on
+    before = link(wait_for(lambda: status(endpoint)), "g1")
+    world.kill()
+    world.wait()
+    assert wait_for(lambda: (ln := link(status(endpoint), "g1")) is not None and ln.state == "paused", 15)
+    world2 = procs.start("world", "gridworld", "--id", "g1", "--connect", endpoint, "-q")
+    after = wait_for(lambda: (ln := link(status(endpoint), "g1")) is not None and ln.state == "attached"
+                     and ln.steps > before.steps + 500 and ln, 30)
+    assert after and after.embedding_version >= before.embedding_version
+    # the learned policy survived: the next embedding is already good
+    watch2 = procs.start("watch", "--json", "--no-events", "--count", "1", "--timeout", "60", "--connect", endpoint)
+    nxt = read_json_lines(watch2, 1, 70)
+    assert nxt and nxt[0]["version"] > before.embedding_version and nxt[0]["procrustes_error"] < 0.05
+    assert procs.stop(world2) == 0
+    assert procs.stop(agent) == 0  # clean stop on SIGINT
+
+
+def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
+    agent = procs.start("agent", "--listen", endpoint, "-q")
+    procs.start("world", "gridworld", "--id", "g2", "--connect", endpoint, "-q")
+    assert wait_for(lambda: (ln := link(status(endpoint), "g2")) is not None and ln.steps > 200, 30)
+    events: list[AgentEvent] = []
+    with Bus(BusConfig.for_role("world", endpoint)) as bus:
+        bus.subscribe(keys.agent_event("a0", "g2"), lambda m: events.append(codec.decode(AgentEvent, m.payload)))
+        time.sleep(0.5)
+        key = keys.world_obs("g2")
+        good = Observation("g2", 0, 10**9, 0, {"state": np.array([1], np.int32)}, 0.0, False, -1, 0.0, "x")
+        wrong_shape = Observation("g2", 0, 10**9, 0, {"state": np.array([1, 2], np.int32)}, 0.0, False)
+        p = pb.Observation(schema_version=1, world_id="g2", step=5, reward=float("nan"))
+        nan_reward = p.SerializeToString()
+        p = pb.Observation(schema_version=1, world_id="g2", step=5)
+        p.tensors.add(name="state", dtype="int32", shape=[1 << 20, 1 << 20], data=b"")
+        oversize = p.SerializeToString()
+        p = pb.Observation(schema_version=99, world_id="g2", step=5)
+        unknown = p.SerializeToString()
+        for payload in (b"\x07garbage\xff", codec.encode(wrong_shape), nan_reward, oversize, unknown):
+            bus.put(key, payload, "sme.v1.Observation")
+            time.sleep(0.3)
+        assert codec.encode(good)  # a valid message still encodes fine
+        wait_for(lambda: len([e for e in events if e.kind == "bad_input"]) >= 5, 10)
+    kinds = {e.detail.split(":")[0] for e in events if e.kind == "bad_input"}
+    assert kinds == {"malformed", "spec_mismatch", "non_finite", "oversize", "unknown_version"}, events
+    st = status(endpoint)
+    ln = link(st, "g2")
+    assert ln.rejected == {"malformed": 1, "spec_mismatch": 1, "non_finite": 1, "oversize": 1, "unknown_version": 1}
+    steps = ln.steps
+    assert wait_for(lambda: link(status(endpoint), "g2").steps > steps + 200, 20)  # still learning
+    assert agent.poll() is None
+
+
+def test_status_and_watch_fail_clearly_without_agent(procs, endpoint):
+    st = procs.start("status", "--connect", endpoint)
+    st.wait(20)
+    assert st.returncode == 2 and "is `sme agent` running?" in st.stderr.read()
+    w = procs.start("watch", "--count", "1", "--timeout", "1", "--connect", endpoint)
+    w.wait(20)
+    assert w.returncode == 1 and "timed out" in w.stderr.read()
+
+
+def test_world_waits_for_agent_and_stops_on_sigterm(procs, endpoint):
+    world = procs.start("world", "gridworld", "--id", "g3", "--connect", endpoint, "-q")
+    time.sleep(1.5)
+    assert world.poll() is None  # keeps retrying, no crash
+    agent = procs.start("agent", "--listen", endpoint, "-q")
+    assert wait_for(lambda: (ln := link(status(endpoint), "g3")) is not None and ln.steps > 100, 30)
+    assert procs.stop(world, signal.SIGTERM) == 0
+    assert procs.stop(agent, signal.SIGTERM) == 0
+
+
+def test_daemon_checkpoint_resumes_after_kill(procs, endpoint, tmp_path):
+    state = str(tmp_path / "state")
+    agent = procs.start("agent", "--listen", endpoint, "--state-dir", state, "--checkpoint-every", "1", "-q")
+    procs.start("world", "gridworld", "--id", "g4", "--connect", endpoint, "-q")
+    assert wait_for(lambda: (ln := link(status(endpoint), "g4")) is not None and ln.embedding_version >= 9, 60)
+    time.sleep(1.5)
+    agent.kill()
+    agent.wait()
+    procs.start("agent", "--listen", endpoint, "--state-dir", state, "-q")
+    restored = wait_for(lambda: link(status(endpoint), "g4"), 30)
+    assert restored.embedding_version >= 9  # numbering carries on from the checkpoint
+    ln = wait_for(lambda: (ln := link(status(endpoint), "g4")) is not None
+                  and ln.embedding_version > restored.embedding_version and ln, 60)
+    assert ln and ln.last_procrustes_error < 0.05  # the first embedding after the restart is already good
