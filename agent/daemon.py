@@ -16,6 +16,7 @@ import threading
 import time
 from typing import Any, Callable
 
+from agent.detectors import DEFAULT_DETECTOR, make_detector
 from agent.link import WorldLink
 from agent.programs.registry import make_program
 from protocol import codec, keys
@@ -32,7 +33,10 @@ class AgentDaemon:
     def __init__(self, bus: Bus, agent_id: str = keys.DEFAULT_AGENT_ID, seed: int = 0,
                  state_dir: str | None = None, checkpoint_every: float = 30.0,
                  program_params: dict[str, dict[str, Any]] | None = None,
-                 on_output: Callable[[str, Any], None] | None = None, threaded_links: bool = False) -> None:
+                 on_output: Callable[[str, Any], None] | None = None, threaded_links: bool = False,
+                 detector: str = DEFAULT_DETECTOR) -> None:
+        make_detector(detector)  # fail early on an unknown name
+        self.detector = detector
         self.bus = bus
         self.threaded_links = threaded_links
         self.agent_id = keys.check_id(agent_id, "agent id")
@@ -157,7 +161,8 @@ class AgentDaemon:
         for wid, link in list(self.links.items()):
             path = self._checkpoint_path(wid)
             with link.lock:
-                data = pickle.dumps({"spec": link.spec, "program": link.program, "version": link.version},
+                data = pickle.dumps({"spec": link.spec, "program": link.program, "version": link.version,
+                                     "detector": link.detector},
                                     protocol=pickle.HIGHEST_PROTOCOL)
             tmp = f"{path}.tmp"
             with open(tmp, "wb") as f:
@@ -205,10 +210,11 @@ class AgentDaemon:
             log.warning("world %s: no program: %s", wid, e)
             self.event(wid, "attach_failed", str(e))
             return
-        link = WorldLink(self.agent_id, spec, program, self.publish)
+        link = WorldLink(self.agent_id, spec, program, self.publish, make_detector(self.detector))
         link.truth = truth
         if saved:
             link.version = saved["version"]
+            link.detector = saved.get("detector") or link.detector
         self.links[wid] = link
         if self.threaded_links:
             link.start()

@@ -10,12 +10,22 @@ from agent.programs.base import EmbeddingOutput
 from protocol.messages import Truth
 
 
-def score_embedding(output: EmbeddingOutput, truth: Truth | None) -> float | None:
-    """Procrustes error of the output's rows against the truth rows with the same ids."""
+def evaluate_embedding(output: EmbeddingOutput, truth: Truth | None) -> dict[str, float]:
+    """Scores of the output's rows against the truth rows with the same ids: `procrustes_error`
+    always (when truth is known), and `e_geometry` (Eq 4.6: mean distance without alignment) for
+    outputs whose coordinates are in the truth's units."""
     if truth is None or "positions" not in truth.tensors:
-        return None
+        return {}
     pos = np.asarray(truth.tensors["positions"], dtype=np.float64)
     ids = np.asarray(output.ids, dtype=np.int64)
     if ids.size < 2 or ids.max(initial=-1) >= pos.shape[0] or ids.min(initial=0) < 0:
-        return None
-    return procrustes_error(pos[ids], output.coordinates)
+        return {}
+    out = {"procrustes_error": procrustes_error(pos[ids], output.coordinates)}
+    if output.absolute and pos.shape[1] == output.coordinates.shape[1]:
+        out["e_geometry"] = float(np.linalg.norm(output.coordinates - pos[ids], axis=1).mean())
+    return out
+
+
+def score_embedding(output: EmbeddingOutput, truth: Truth | None) -> float | None:
+    """Procrustes error of the output against truth, or None when truth is unknown."""
+    return evaluate_embedding(output, truth).get("procrustes_error")

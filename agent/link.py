@@ -13,7 +13,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from agent.evaluation import score_embedding
+from agent.detectors import DropDetector
+from agent.evaluation import evaluate_embedding
 from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from protocol import codec
 from protocol.bus import Inbox
@@ -45,6 +46,7 @@ class LinkCounters:
     stale: int = 0
     rejected: dict[str, int] = field(default_factory=dict)
     embeddings: int = 0
+    drops: int = 0
     reward_mean: float = 0.0
     last_error: float = float("nan")
 
@@ -54,8 +56,9 @@ class WorldLink:
     EVENT_RATE = 5.0  # bad-input events per second at most; counters count everything
 
     def __init__(self, agent_id: str, spec: WorldSpec, program: Program, publish: Publish,
-                 inbox_size: int = 256) -> None:
+                 detector: DropDetector | None = None, inbox_size: int = 256) -> None:
         self.agent_id = agent_id
+        self.detector = detector
         self.spec = spec
         self.world_id = spec.world_id
         self.program = program
@@ -133,9 +136,10 @@ class WorldLink:
             self.reject(e.kind, str(e))
             return None
         with self.lock:
-            return self._answer(obs)
+            return self.answer(obs)
 
-    def _answer(self, obs: Observation) -> Action | None:
+    def answer(self, obs: Observation) -> Action | None:
+        """Run the program on one checked observation and publish its answer and outputs."""
         if obs.session != self.session:
             self.session = obs.session
             self._last_step = -1
@@ -165,20 +169,27 @@ class WorldLink:
         if obs.t == 0:
             c.episodes += 1
         c.reward_mean += self.REWARD_EMA * (obs.reward - c.reward_mean)
+        perf = self.program.performance(obs) if self.detector is not None else None
+        if perf is not None and self.detector.update(perf):
+            c.drops += 1
+            self.event("drop_detected", f"{self.detector.name} saw the reward drop (now {perf:.4g}, "
+                       f"mean before {c.reward_mean:.4g})", obs.step, {"reward": perf})
+            self.program.on_drop(obs.step)
         for item in self.program.drain():
             self._emit(item)
         return act
 
     def _emit(self, item: Any) -> None:
         if isinstance(item, EmbeddingOutput):
-            err = score_embedding(item, self.truth)
+            scores = evaluate_embedding(item, self.truth)
+            err = scores.pop("procrustes_error", None)
             self.version += 1
             self.counters.embeddings += 1
             if err is not None:
                 self.counters.last_error = err
             emb = Embedding(self.agent_id, self.world_id, self.version, item.trigger, item.ids,
                             np.asarray(item.coordinates, dtype=np.float64), item.eigenvalues, err, item.step,
-                            time.time(), dict(item.metrics))
+                            time.time(), {**item.metrics, **scores})
             log.info("world %s: embedding v%d (%s) n=%d error=%s", self.world_id, self.version, item.trigger,
                      len(item.ids), "n/a" if err is None else f"{err:.4f}")
             self.publish("embedding", emb)

@@ -3,14 +3,13 @@ import pytest
 from scipy.stats import spearmanr
 
 from agent.learners.lspi import LSPI, TabularBasis
-from agent.programs.base import EmbeddingOutput
 from agent.programs.gridworld import GridworldProgram
 from tools.inprocess import run_inprocess
 from worlds.gridworld import GridWorld
 
 
 def embeddings(run):
-    return [o for o in run.outputs if isinstance(o, EmbeddingOutput)]
+    return run.embeddings
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -8,6 +8,7 @@ import signal
 import threading
 
 from agent.daemon import AgentDaemon
+from agent.detectors import DEFAULT_DETECTOR, DETECTORS
 from protocol import keys
 from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from tools.common import add_verbosity, setup_logging, verbosity
@@ -26,6 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--state-dir", default=None, metavar="DIR",
                    help="checkpoint each world's learned state here (atomically) and resume from it after a restart")
     p.add_argument("--checkpoint-every", type=float, default=30.0, metavar="S", help="checkpoint period (s)")
+    p.add_argument("--detector", default=DEFAULT_DETECTOR, choices=sorted(DETECTORS),
+                   help=f"reward-drop detector run on each world link (default: {DEFAULT_DETECTOR}, chosen by "
+                   "`sme bench detectors`)")
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)")
     add_bus_arguments(p, "agent")
     add_verbosity(p)
@@ -41,7 +45,7 @@ def run_agent(args: argparse.Namespace) -> int:
         return 2
     with bus:
         daemon = AgentDaemon(bus, args.id, seed=args.seed, state_dir=args.state_dir,
-                             checkpoint_every=args.checkpoint_every)
+                             checkpoint_every=args.checkpoint_every, detector=args.detector)
         stop = threading.Event()
 
         def on_signal(signum, frame):  # noqa: ARG001

@@ -1,6 +1,6 @@
-"""Run a World and a Program in one process, no bus: the same lockstep protocol as the world node
-and the daemon's link (reset after done or on request), used by tests, `reproduce` and the loop
-benchmark's baseline."""
+"""Run a World and a Program in one process, no bus, through the daemon's own WorldLink (the
+same lockstep protocol, scoring, drop detection and events). Used by tests, `reproduce` and the
+loop benchmark's baseline."""
 
 from __future__ import annotations
 
@@ -10,9 +10,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from agent.evaluation import score_embedding
-from agent.programs.base import EmbeddingOutput, Program
-from protocol.messages import Observation
+from agent.detectors import DropDetector
+from agent.link import WorldLink
+from agent.programs.base import Program
+from protocol.messages import AgentEvent, Control, Embedding, Observation
 from worlds.base import World
 
 
@@ -21,41 +22,60 @@ class InProcessRun:
     steps: int = 0
     episodes: int = 0
     seconds: float = 0.0
-    outputs: list[Any] = field(default_factory=list)
-    errors: list[float | None] = field(default_factory=list)  # Procrustes error per embedding output
-    rewards: list[float] = field(default_factory=list)
+    outputs: list[Any] = field(default_factory=list)   # Embedding and AgentEvent messages, in order
+
+    @property
+    def embeddings(self) -> list[Embedding]:
+        return [o for o in self.outputs if isinstance(o, Embedding)]
+
+    @property
+    def errors(self) -> list[float | None]:
+        return [e.procrustes_error for e in self.embeddings]
+
+    def events(self, kind: str | None = None) -> list[AgentEvent]:
+        return [o for o in self.outputs if isinstance(o, AgentEvent) and (kind is None or o.kind == kind)]
 
 
-def run_inprocess(world: World, program: Program, steps: int,
-                  on_output: Callable[[Any, float | None], None] | None = None,
+def run_inprocess(world: World, program: Program, steps: int, detector: DropDetector | None = None,
+                  on_output: Callable[[Any], None] | None = None,
                   stop_when: Callable[[InProcessRun], bool] | None = None,
-                  controls: dict[int, Any] | None = None, keep_rewards: bool = False) -> InProcessRun:
+                  controls: dict[int, Control] | None = None,
+                  on_step: Callable[[int, Observation], None] | None = None) -> InProcessRun:
+    """`controls[k]` is applied to the world after step k is answered (as a live perturbation
+    would arrive between steps); `on_step(k, obs)` sees every observation."""
     run = InProcessRun()
+    answers: list[Any] = []
+
+    def publish(channel: str, msg: Any) -> None:
+        if channel == "act":
+            answers.append(msg)
+        else:
+            run.outputs.append(msg)
+            if on_output:
+                on_output(msg)
+
+    link = WorldLink("inproc", world.spec(), program, publish, detector)
+    link.truth = world.truth()
     t0 = time.perf_counter()
     res = world.reset()
     episode, t, start = 0, 0, -1
     for k in range(steps):
         obs = Observation(world.world_id, episode, k, t, res.tensors, float(res.reward), bool(res.done), start)
-        if keep_rewards:
-            run.rewards.append(float(res.reward))
-        dec = program.act(obs)
-        for item in program.drain():
-            err = None
-            if isinstance(item, EmbeddingOutput):
-                err = score_embedding(item, world.truth())
-                run.errors.append(err)
-            run.outputs.append(item)
-            if on_output:
-                on_output(item, err)
+        if on_step:
+            on_step(k, obs)
+        answers.clear()
+        link.answer(obs)
+        act = answers[-1]
         if controls and k in controls:
             world.perturb(controls[k])
-        if res.done or dec.reset:
-            start = dec.start if dec.reset else -1
+            link.truth = world.truth()
+        if res.done or act.reset:
+            start = act.start if act.reset else -1
             res = world.reset(start=None if start < 0 else start)
             episode += 1
             t = 0
         else:
-            res = world.step(np.asarray(dec.values, dtype=np.float64))
+            res = world.step(np.asarray(act.values, dtype=np.float64))
             t += 1
         run.steps += 1
         if stop_when and stop_when(run):

@@ -35,6 +35,7 @@ class EmbeddingOutput:
     eigenvalues: tuple[float, ...]
     step: int
     metrics: dict[str, float] = field(default_factory=dict)
+    absolute: bool = False  # coordinates are in the truth's own units (E_geometry is meaningful)
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,14 @@ class Program(abc.ABC):
 
     def world_restarted(self) -> None:
         """The world process restarted (new session): an episode in progress is gone."""
+
+    def performance(self, obs: Observation) -> float | None:
+        """The signal the daemon's drop detector watches (None: nothing to report for this step).
+        Programs without a meaningful per-step performance return None and are not watched."""
+        return None
+
+    def on_drop(self, step: int) -> None:
+        """The detector saw a drop in `performance`: relearn as the learner prescribes."""
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()

@@ -14,8 +14,15 @@ def _gridworld(spec: WorldSpec, seed: int, **kw: Any) -> Program:
     return GridworldProgram(spec, seed, **kw)
 
 
+def _retina(spec: WorldSpec, seed: int, **kw: Any) -> Program:
+    from agent.programs.retina import RetinaProgram
+
+    return RetinaProgram(spec, seed, **kw)
+
+
 PROGRAMS: dict[str, Callable[..., Program]] = {
     "gridworld": _gridworld,
+    "retina": _retina,
     "echo": lambda spec, seed, **kw: EchoProgram(spec, seed),
 }
 

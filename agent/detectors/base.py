@@ -1,0 +1,90 @@
+"""The detector interface: `update(x)` one reward at a time, returning True on the step a drop is
+detected; `statistic` is the current test statistic (for plots); `reset()` forgets everything."""
+
+from __future__ import annotations
+
+import abc
+import collections
+import math
+
+
+class DropDetector(abc.ABC):
+    name = "detector"
+
+    def __init__(self) -> None:
+        self.drift_detected = False
+        self.n = 0
+
+    @abc.abstractmethod
+    def _update(self, x: float) -> bool: ...
+
+    def update(self, x: float) -> bool:
+        x = float(x)
+        if not math.isfinite(x):
+            raise ValueError(f"{self.name}: reward must be finite, got {x!r}")
+        self.n += 1
+        self.drift_detected = self._update(x)
+        return self.drift_detected
+
+    @property
+    @abc.abstractmethod
+    def statistic(self) -> float: ...
+
+    @abc.abstractmethod
+    def reset(self) -> None: ...
+
+
+class RunningMoments:
+    """Mean and variance of the reference (pre-drop) regime: exact (Welford) for the first `warmup`
+    samples, then exponentially weighted with rate `rate` so slow improvements are followed.
+
+    Samples join the reference `lag` steps late (`push`): a drop is detected long before its
+    samples would enter, and, unlike updating only while no drop is suspected, no selection bias
+    creeps into the mean and variance."""
+
+    def __init__(self, warmup: int = 100, rate: float = 0.002, lag: int = 50) -> None:
+        if warmup < 2:
+            raise ValueError("warmup must be >= 2")
+        if not 0 < rate < 1:
+            raise ValueError("rate must be in (0, 1)")
+        if lag < 0:
+            raise ValueError("lag must be >= 0")
+        self.warmup = warmup
+        self.rate = rate
+        self.lag = lag
+        self.reset()
+
+    def push(self, x: float) -> None:
+        self._pending.append(x)
+        if len(self._pending) > self.lag:
+            self.add(self._pending.popleft())
+
+    def reset(self) -> None:
+        self._pending: collections.deque[float] = collections.deque()
+        self.count = 0
+        self.mean = 0.0
+        self._m2 = 0.0
+        self.var = 0.0
+
+    @property
+    def ready(self) -> bool:
+        return self.count >= self.warmup
+
+    @property
+    def sd(self) -> float:
+        return math.sqrt(max(self.var, 1e-12))
+
+    def add(self, x: float) -> None:
+        self.count += 1
+        if self.count <= self.warmup:
+            d = x - self.mean
+            self.mean += d / self.count
+            self._m2 += d * (x - self.mean)
+            self.var = self._m2 / max(self.count - 1, 1)
+        else:
+            d = x - self.mean
+            self.mean += self.rate * d
+            self.var = (1 - self.rate) * (self.var + self.rate * d * d)
+
+    def z(self, x: float) -> float:
+        return (x - self.mean) / self.sd

@@ -1,0 +1,50 @@
+"""The dissertation's detector (4.4.2, 8.4): a large negative change in the moving average of the
+reward. A short moving average is compared with the long-run reference level; a drop is declared
+when the short average falls below the reference by more than `drop` reference standard deviations
+of the short average (the reference follows the stream with a lag)."""
+
+from __future__ import annotations
+
+import collections
+import math
+
+from agent.detectors.base import DropDetector, RunningMoments
+
+
+class MovingAverageDrop(DropDetector):
+    name = "moving_average"
+
+    def __init__(self, window: int = 20, drop: float = 5.0, warmup: int = 200, rate: float = 0.002) -> None:
+        super().__init__()
+        if window < 1 or drop <= 0:
+            raise ValueError("window must be >= 1 and drop > 0")
+        self.window, self.drop = window, drop
+        self._ref = RunningMoments(warmup, rate)
+        self.reset()
+
+    def reset(self) -> None:
+        self.n = 0
+        self.drift_detected = False
+        self._ref.reset()
+        self._buf: collections.deque[float] = collections.deque(maxlen=self.window)
+        self._stat = 0.0
+
+    @property
+    def statistic(self) -> float:
+        return self._stat
+
+    def _update(self, x: float) -> bool:
+        self._buf.append(x)
+        if not self._ref.ready:
+            self._ref.push(x)
+            return False
+        short = sum(self._buf) / len(self._buf)
+        se = self._ref.sd / math.sqrt(len(self._buf))
+        self._stat = (self._ref.mean - short) / se
+        if self._stat > self.drop:
+            self._ref.reset()
+            self._buf.clear()
+            self._stat = 0.0
+            return True
+        self._ref.push(x)
+        return False

@@ -1,0 +1,111 @@
+"""The factored saccade learner of ch. 4 (Eq 4.2-4.7).
+
+Each receptive field k keeps a preferred saccade pi_k and a reward estimate R_k. The retina's
+saccade is the activation-weighted mean pi*(s) = sum_k d_k pi_k / sum_k d_k (Eq 4.3) plus
+exploration. After the saccade, with pre-saccade activations d_k and reward R:
+  basic rule  (Eq 4.4-4.5): if R > R_k:  R_k += d_k a (R - R_k);  pi_k += d_k a (a_taken - pi_k)
+  robust rule (Eq 4.7):     R_k += d_k a (R - R_k) always;  pi_k moves as above when R > R_k.
+Exploration (4.4.2): gamma = r_a / r_ref, where r_a = sum_k d_k R_k / sum_k d_k is the reward the
+active fields expect and r_ref the retina's moving average of observed rewards; the saccade is
+gamma pi* + (1 - gamma) a_random, plus Gaussian noise of sd `noise_sd`. (The dissertation divides
+by the maximum reward seen; with the robust rule R_k are averages, so that ratio never reaches 1
+and random saccades would be mixed in for ever. Against the moving average, gamma is ~1 once the
+estimates are learned and 0 right after `reset_estimates()`, which a detected drop triggers.)
+The learned geometry is -pi_k: the position of field k in motor units.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+RULES = ("basic", "robust")
+EXPLORATION = ("gamma", "gaussian")
+
+
+class SaccadeLearner:
+    def __init__(self, n_fields: int, low: np.ndarray, high: np.ndarray, alpha: float = 0.5,
+                 noise_sd: float | None = None, rule: str = "robust", exploration: str = "gamma",
+                 init_spread: float = 1.0, seed: int = 0) -> None:
+        low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+        if n_fields < 1:
+            raise ValueError("n_fields must be >= 1")
+        if low.shape != high.shape or low.ndim != 1 or not (high > low).all():
+            raise ValueError("low/high must be 1-D bounds with high > low")
+        if not 0 < alpha <= 1:
+            raise ValueError("alpha must be in (0, 1]")
+        if rule not in RULES:
+            raise ValueError(f"rule must be one of {RULES}")
+        if exploration not in EXPLORATION:
+            raise ValueError(f"exploration must be one of {EXPLORATION}")
+        if not 0 <= init_spread <= 1:
+            raise ValueError("init_spread must be in [0, 1]")
+        self.init_spread = init_spread
+        self.n_fields = n_fields
+        self.low, self.high = low, high
+        self.alpha = alpha
+        # default: the dissertation's 10 px, as the fraction of the action range it is on our retina
+        self.noise_sd = float(noise_sd) if noise_sd is not None else float(0.075 * (high - low).mean())
+        self.rule = rule
+        self.exploration = exploration
+        self.seed = seed
+        self.reset()
+
+    REF_RATE = 0.02
+
+    def reset(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+        self.pi = self.rng.uniform(self.low, self.high, (self.n_fields, self.low.size)) * self.init_spread
+        self.R = np.zeros(self.n_fields)
+        self.r_ref = 0.0
+        self.updates = 0
+        self.resets = 0
+
+    def reset_estimates(self) -> None:
+        """After a large drop (lesion, reversal): forget the reward estimates so exploration rises."""
+        self.R[:] = 0.0
+        self.resets += 1
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Learned field positions -pi_k, [n_fields, dims]."""
+        return -self.pi
+
+    def greedy(self, delta: np.ndarray) -> np.ndarray:
+        """pi*(s) (Eq 4.3); the centre of the action box when nothing is active."""
+        d = np.asarray(delta, dtype=np.float64)
+        s = d.sum()
+        if s <= 1e-12:
+            return (self.low + self.high) / 2
+        return d @ self.pi / s
+
+    def expected_reward(self, delta: np.ndarray) -> float:
+        d = np.asarray(delta, dtype=np.float64)
+        s = d.sum()
+        return float(d @ self.R / s) if s > 1e-12 else 0.0
+
+    def act(self, delta: np.ndarray) -> np.ndarray:
+        a = self.greedy(delta)
+        if self.exploration == "gamma":
+            gamma = 0.0 if self.r_ref <= 0 else float(np.clip(self.expected_reward(delta) / self.r_ref, 0.0, 1.0))
+            a = gamma * a + (1 - gamma) * self.rng.uniform(self.low, self.high)
+        a = a + self.rng.normal(0.0, self.noise_sd, a.shape)
+        return np.clip(a, self.low, self.high)
+
+    def learn_one(self, delta: np.ndarray, action: np.ndarray, reward: float) -> None:
+        d = np.asarray(delta, dtype=np.float64)
+        a = np.asarray(action, dtype=np.float64)
+        if d.shape != (self.n_fields,) or a.shape != self.low.shape:
+            raise ValueError(f"expected delta [{self.n_fields}] and action {list(self.low.shape)}, "
+                             f"got {list(d.shape)} and {list(a.shape)}")
+        if not np.isfinite(reward):
+            raise ValueError("reward must be finite")
+        self.r_ref += self.REF_RATE * (float(reward) - self.r_ref) if self.updates else float(reward)
+        better = reward > self.R
+        step = d * self.alpha
+        if self.rule == "robust":
+            self.R += step * (reward - self.R)
+        else:
+            self.R = np.where(better, self.R + step * (reward - self.R), self.R)
+        w = np.where(better, step, 0.0)[:, None]
+        self.pi += w * (a - self.pi)
+        self.updates += 1

@@ -1,0 +1,101 @@
+"""The retina program (ch. 4): learn saccades with the factored learner, publish the ballistic
+embedding (learned field positions -pi_k) periodically and after every relearning.
+
+Ballistic traces have length 1, so the trace distance between fields i and j is
+||pi_i - pi_j|| and classical MDS of those distances is -pi up to a rigid motion; the program
+publishes -pi_k directly (motor units, so E_geometry can be measured without alignment) and, as
+eigenvalues, the MDS spectrum of those distances (the eigenvalues of the centred scatter matrix).
+
+The daemon's drop detector watches the post-saccade reward (`performance`). On a drop the program
+resets its reward estimates (4.4.2), which raises exploration, relearns, and once the reward has
+settled publishes an embedding whose trigger names the drop.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.learners.saccade import SaccadeLearner
+from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from protocol.errors import SpecMismatch
+from protocol.messages import Observation, WorldSpec
+
+
+class RetinaProgram(Program):
+    name = "retina"
+
+    def __init__(self, spec: WorldSpec, seed: int = 0, rule: str = "robust", exploration: str = "gamma",
+                 alpha: float = 0.5, noise_sd: float | None = None, embed_every: int = 1000,
+                 settle_min: int = 500, settle_window: int = 200, settle_gain: float = 0.03) -> None:
+        super().__init__(spec, seed)
+        a = spec.action_space
+        if a.discrete or a.dims != 2:
+            raise SpecMismatch(f"retina program needs a 2-D box action space, world {spec.world_id} has {a}")
+        self.n = int(np.prod(spec.sensor("fields").shape))
+        self.learner = SaccadeLearner(self.n, np.array(a.low), np.array(a.high), alpha=alpha, noise_sd=noise_sd,
+                                      rule=rule, exploration=exploration, seed=seed)
+        self.embed_every = embed_every
+        self.settle_min, self.settle_window, self.settle_gain = settle_min, settle_window, settle_gain
+        self.episodes = 0
+        self.version = 0
+        self._pre: np.ndarray | None = None
+        self._action: np.ndarray | None = None
+        self._rewards: list[float] = []
+        self._drop: tuple[int, int] | None = None  # (step, episode) of the drop being relearned
+
+    def _fields(self, obs: Observation) -> np.ndarray:
+        f = obs.tensors["fields"].reshape(-1)
+        if f.size != self.n:
+            raise SpecMismatch(f"expected {self.n} fields, got {f.size}")
+        return f
+
+    def embedding(self, trigger: str, step: int) -> EmbeddingOutput:
+        X = self.learner.positions
+        Xc = X - X.mean(axis=0)
+        eig = np.sort(np.linalg.eigvalsh(Xc.T @ Xc))[::-1]
+        recent = self._rewards[-self.settle_window:]
+        return EmbeddingOutput(trigger, tuple(range(self.n)), X.copy(), tuple(float(e) for e in eig), step,
+                               {"episodes": float(self.episodes), "reward_mean": float(np.mean(recent)) if recent else 0.0,
+                                "resets": float(self.learner.resets)}, absolute=True)
+
+    def _settled(self) -> bool:
+        since = self.episodes - self._drop[1]
+        w = self.settle_window
+        if since < max(self.settle_min, 2 * w):
+            return False
+        now, before = np.mean(self._rewards[-w:]), np.mean(self._rewards[-2 * w:-w])
+        return bool(now <= before * (1 + self.settle_gain) + 1e-9)
+
+    def act(self, obs: Observation) -> Decision:
+        f = self._fields(obs)
+        if obs.t == 0 and not obs.done:
+            self._pre = f
+            self._action = self.learner.act(f)
+            return Decision(tuple(float(v) for v in self._action))
+        if self._pre is not None and obs.t > 0:
+            self.learner.learn_one(self._pre, self._action, obs.reward)
+            self.episodes += 1
+            self._rewards.append(float(obs.reward))
+            if len(self._rewards) > 4 * self.settle_window:
+                del self._rewards[: -2 * self.settle_window]
+            if self.episodes % self.embed_every == 0:
+                self.emit(self.embedding("periodic", obs.step))
+            if self._drop is not None and self._settled():
+                self.emit(EventOutput("relearned", f"reward settled {self.episodes - self._drop[1]} episodes "
+                                      f"after the drop at step {self._drop[0]}", obs.step,
+                                      {"episodes": float(self.episodes - self._drop[1])}))
+                self.emit(self.embedding(f"relearned after drop at step {self._drop[0]}", obs.step))
+                self._drop = None
+        self._pre = None
+        return Decision(reset=True)
+
+    def performance(self, obs: Observation) -> float | None:
+        return float(obs.reward) if obs.t > 0 and obs.done else None
+
+    def on_drop(self, step: int) -> None:
+        self.learner.reset_estimates()
+        self._drop = (step, self.episodes)
+        self.emit(EventOutput("relearning", "reward estimates reset; exploration raised", step))
+
+    def world_restarted(self) -> None:
+        self._pre = None

@@ -1,0 +1,242 @@
+"""Foveated retina on a pan/tilt camera (ch. 4, Fig 4.1), rendered headless with PyBullet.
+
+A pinhole camera at the origin faces a dark wall with a bright spot (the salient target; options:
+several spots, or a textured wall). The retina has `layers` layers of `fields` x `fields` receptive
+fields, all centred; fields in the largest layer are `field_px` retina pixels wide and halve per
+layer (default 4 layers of 32x32 over 128x128 px: 4, 2, 1, 0.5 px). Each layer is rendered with its
+own narrowed field of view at `supersample`^2 samples per field, so every field reports the
+normalised mean of its own patch at its own resolution. Fields are published in a fixed shuffled
+order: the agent is never told where a field is.
+
+Actions are saccades in motor units (degrees of pan, degrees of tilt). Episodes are ballistic:
+a random reposition (t = 0, reward 0), one saccade, reward = total activation after it (Eq 4.1),
+done. Truth: each field's position in action units, defined as minus the saccade that brings a
+point seen at the field's centre to the retina centre (so learned positions -pi_k compare directly).
+Perturbations: lesion (fields in a disc read 0), reverse (up/down motor commands swapped), noise
+(additive sensor noise), heal (undo all).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+import pybullet as p
+from pybullet_utils.bullet_client import BulletClient
+
+from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
+from worlds.base import PerturbationError, StepResult, World, param
+
+SCENES = ("spot", "spots", "texture")
+
+
+def field_layout(layers: int, fields: int, field_px: float) -> np.ndarray:
+    """Centres (u right, v up; retina px from the centre) and sizes of all fields, layer by layer,
+    row by row (top first): an array [n, 3] of (u, v, size)."""
+    out = []
+    for L in range(layers):
+        size = field_px / 2**L
+        c = (np.arange(fields) - (fields - 1) / 2) * size
+        vv, uu = np.meshgrid(-c, c, indexing="ij")  # row r has v = -c[r]: top row first
+        out.append(np.stack([uu.ravel(), vv.ravel(), np.full(uu.size, size)], axis=1))
+    return np.concatenate(out)
+
+
+class RetinaWorld(World):
+    kind = "retina"
+    max_episode_steps = 1
+
+    def __init__(self, world_id: str = "retina", seed: int = 0, layers: int = 4, fields: int = 32,
+                 field_px: float = 4.0, fov_deg: float = 30.0, scene: str = "spot", spot_px: float = 6.0,
+                 n_spots: int = 3, reposition_px: float = 48.0, max_saccade_deg: float = 16.0,
+                 supersample: int = 2, wall_distance: float = 5.0) -> None:
+        super().__init__(world_id, seed)
+        if scene not in SCENES:
+            raise ValueError(f"scene must be one of {SCENES}, not {scene!r}")
+        if layers < 1 or fields < 2 or field_px <= 0 or supersample < 1:
+            raise ValueError("layers >= 1, fields >= 2, field_px > 0 and supersample >= 1 are required")
+        if not 0 < fov_deg < 120:
+            raise ValueError("fov_deg must be in (0, 120)")
+        self.layers, self.fields, self.field_px = layers, fields, field_px
+        self.supersample = supersample
+        self.retina_px = fields * field_px
+        self.focal = (self.retina_px / 2) / math.tan(math.radians(fov_deg) / 2)  # px
+        self.fov_deg = fov_deg
+        self.scene = scene
+        self.reposition_px = reposition_px
+        self.max_saccade = max_saccade_deg
+        self.wall = wall_distance
+        self.layout = field_layout(layers, fields, field_px)
+        self.n = self.layout.shape[0]
+        # published order: fixed shuffle; order[i] = layout index of published field i
+        self.order = np.random.default_rng(20_000 + seed).permutation(self.n)
+        self.centres = self.layout[self.order, :2]
+        self.pan = self.tilt = 0.0
+        self.reversed = False
+        self.noise_sd = 0.0
+        self.lesion = np.zeros(self.n, dtype=bool)
+        self._client = BulletClient(connection_mode=p.DIRECT)
+        self._spot_world: list[np.ndarray] = []
+        self._build_scene(spot_px, n_spots)
+        res = fields * supersample
+        self._proj = [self._client.computeProjectionMatrixFOV(
+            math.degrees(2 * math.atan(math.tan(math.radians(fov_deg) / 2) / 2**L)), 1.0, 0.1, 2 * wall_distance)
+            for L in range(layers)]
+        self._res = res
+
+    @classmethod
+    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "RetinaWorld":
+        return cls(world_id, seed, layers=param(params, "layers", 4, int), fields=param(params, "fields", 32, int),
+                   field_px=param(params, "field_px", 4.0, float), fov_deg=param(params, "fov_deg", 30.0, float),
+                   scene=param(params, "scene", "spot"), spot_px=param(params, "spot_px", 6.0, float),
+                   n_spots=param(params, "n_spots", 3, int),
+                   reposition_px=param(params, "reposition_px", 48.0, float),
+                   max_saccade_deg=param(params, "max_saccade_deg", 16.0, float),
+                   supersample=param(params, "supersample", 2, int))
+
+    # scene -------------------------------------------------------------------------------------
+    def _build_scene(self, spot_px: float, n_spots: int) -> None:
+        c = self._client
+        half = self.wall * 1.5
+        colour = [1, 1, 1, 1] if self.scene == "texture" else [0, 0, 0, 1]
+        wall_vis = c.createVisualShape(p.GEOM_BOX, halfExtents=[0.01, half, half], rgbaColor=colour)
+        wall = c.createMultiBody(0, baseVisualShapeIndex=wall_vis, basePosition=[self.wall + 0.01, 0, 0])
+        if self.scene == "texture":
+            import os
+
+            import pybullet_data
+
+            tex = c.loadTexture(os.path.join(pybullet_data.getDataPath(), "checker_grid.jpg"))
+            c.changeVisualShape(wall, -1, textureUniqueId=tex)
+            return
+        radius = self.wall * spot_px / self.focal  # spot_px retina pixels wide when seen straight on
+        k = 1 if self.scene == "spot" else n_spots
+        rng = np.random.default_rng(30_000 + self.seed)
+        for i in range(k):
+            yz = np.zeros(2) if i == 0 else rng.uniform(-1, 1, 2) * self.wall * 0.25
+            pos = np.array([self.wall - 0.002, yz[0], yz[1]])
+            vis = c.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=0.002, rgbaColor=[1, 1, 1, 1],
+                                      visualFrameOrientation=c.getQuaternionFromEuler([0, math.pi / 2, 0]))
+            c.createMultiBody(0, baseVisualShapeIndex=vis, basePosition=pos.tolist())
+            self._spot_world.append(pos)
+
+    def _direction(self, pan: float, tilt: float) -> np.ndarray:
+        pr, tr = math.radians(pan), math.radians(tilt)
+        return np.array([math.cos(tr) * math.cos(pr), -math.cos(tr) * math.sin(pr), math.sin(tr)])
+
+    def _basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        fwd = self._direction(self.pan, self.tilt)
+        right = np.cross(fwd, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, fwd)
+        return fwd, right, up
+
+    def render(self) -> np.ndarray:
+        """Activations of all fields in published order, with lesion and noise applied."""
+        c = self._client
+        fwd, _, up = self._basis()
+        view = c.computeViewMatrix([0, 0, 0], (fwd * self.wall).tolist(), up.tolist())
+        ss, f = self.supersample, self.fields
+        acts = []
+        for L in range(self.layers):
+            _, _, rgb, _, _ = c.getCameraImage(self._res, self._res, view, self._proj[L], shadow=0,
+                                               renderer=p.ER_TINY_RENDERER, flags=p.ER_NO_SEGMENTATION_MASK)
+            img = np.asarray(rgb, dtype=np.float32).reshape(self._res, self._res, 4)[..., :3].mean(axis=2) / 255.0
+            acts.append(img.reshape(f, ss, f, ss).mean(axis=(1, 3)).ravel())
+        a = np.concatenate(acts)[self.order]
+        if self.noise_sd > 0:
+            a = a + self.rng.normal(0.0, self.noise_sd, a.shape)
+        a[self.lesion] = 0.0
+        return np.clip(a, 0.0, 1.0).astype(np.float32)
+
+    def target_offset_px(self, index: int = 0) -> np.ndarray:
+        """Where spot `index` is seen, in retina px from the centre (u right, v up)."""
+        fwd, right, up = self._basis()
+        d = self._spot_world[index]
+        z = float(d @ fwd)
+        return np.array([self.focal * float(d @ right) / z, self.focal * float(d @ up) / z])
+
+    def _look_at_offset(self, u: float, v: float) -> None:
+        """Point the camera so that spot 0 is seen near retina offset (u, v)."""
+        d = self._spot_world[0] if self._spot_world else np.array([self.wall, 0.0, 0.0])
+        sp = math.degrees(math.atan2(-d[1], d[0]))
+        st = math.degrees(math.atan2(d[2], math.hypot(d[0], d[1])))
+        du, dv = self.saccade_for(u, v)
+        self.pan, self.tilt = sp - du, st - dv
+
+    def saccade_for(self, u: float | np.ndarray, v: float | np.ndarray) -> np.ndarray:
+        """The (pan, tilt) saccade, in degrees, that centres a point seen at retina offset (u, v)
+        from straight-ahead; exact for a level camera."""
+        pan = np.degrees(np.arctan2(u, self.focal))
+        tilt = np.degrees(np.arctan2(v, np.hypot(self.focal, u)))
+        return np.stack([pan, tilt], axis=-1)
+
+    # World interface ---------------------------------------------------------------------------
+    def spec(self) -> WorldSpec:
+        m = self.max_saccade
+        return WorldSpec(
+            world_id=self.world_id, kind=self.kind,
+            sensors=(SensorSpec("fields", "float32", (self.n,), 0.0, 1.0,
+                                "receptive-field activations in a fixed shuffled order"),),
+            action_space=ActionSpace(low=(-m, -m), high=(m, m), names=("pan_deg", "tilt_deg")),
+            reward_min=0.0, reward_max=float(self.n), program="retina", n_starts=0,
+            params={"layers": str(self.layers), "fields": str(self.fields), "field_px": str(self.field_px),
+                    "scene": self.scene, "fov_deg": str(self.fov_deg)},
+        )
+
+    def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        u, v = self.rng.uniform(-self.reposition_px, self.reposition_px, 2)
+        self._look_at_offset(u, v)
+        return StepResult({"fields": self.render()}, 0.0, False)
+
+    def step(self, action: np.ndarray) -> StepResult:
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != (2,) or not np.isfinite(a).all():
+            raise ValueError(f"a saccade is 2 finite numbers (pan, tilt), got {a.tolist()}")
+        a = np.clip(a, -self.max_saccade, self.max_saccade)
+        self.pan += a[0]
+        self.tilt += -a[1] if self.reversed else a[1]
+        self.tilt = float(np.clip(self.tilt, -80, 80))
+        fields = self.render()
+        return StepResult({"fields": fields}, float(fields.sum(dtype=np.float64)), True)
+
+    def perturb(self, control: Control) -> str:
+        k, prm = control.kind, control.params
+        if k == "lesion":
+            u = param(prm, "u", 3.0, float)
+            v = param(prm, "v", 3.0, float)
+            r = param(prm, "radius", 2.5, float)
+            hit = np.hypot(self.centres[:, 0] - u, self.centres[:, 1] - v) <= r
+            self.lesion |= hit
+            return f"lesion: {int(hit.sum())} fields within {r} px of ({u}, {v}) px now read 0"
+        if k == "reverse":
+            self.reversed = not self.reversed
+            return f"reverse: up/down motor commands {'swapped' if self.reversed else 'restored'}"
+        if k == "noise":
+            self.noise_sd = param(prm, "sd", 0.05, float)
+            if self.noise_sd < 0:
+                raise PerturbationError("noise sd must be >= 0")
+            return f"noise: additive sensor noise sd {self.noise_sd}"
+        if k == "heal":
+            self.lesion[:] = False
+            self.reversed = False
+            self.noise_sd = 0.0
+            return "heal: lesion, reversal and noise undone"
+        raise PerturbationError(f"retina has no perturbation {k!r}; use lesion, reverse, noise or heal")
+
+    def truth(self) -> Truth:
+        pos = -self.saccade_for(self.centres[:, 0], self.centres[:, 1])
+        if self.reversed:
+            pos[:, 1] *= -1
+        return Truth(self.world_id, "fields", {"positions": pos, "pixels": self.centres.copy()})
+
+    def close(self) -> None:
+        if self._client is not None:
+            try:
+                self._client.disconnect()
+            except p.error:
+                pass
+            self._client = None
