@@ -170,10 +170,12 @@ class WorldLink:
             c.episodes += 1
         c.reward_mean += self.REWARD_EMA * (obs.reward - c.reward_mean)
         perf = self.program.performance(obs) if self.detector is not None else None
-        if perf is not None and self.detector.update(perf):
-            c.drops += 1
-            self.event("drop_detected", f"{self.detector.name} saw the reward drop (now {perf:.4g}, "
-                       f"mean before {c.reward_mean:.4g})", obs.step, {"reward": perf})
+        if perf is not None:
+            ref = self.detector.reference
+            if self.detector.update(perf):
+                c.drops += 1
+                self.event("drop_detected", f"{self.detector.name} saw the reward drop (now {perf:.4g}, "
+                           f"reference {ref:.4g})", obs.step, {"reward": perf, "reference": ref})
             self.program.on_drop(obs.step)
         for item in self.program.drain():
             self._emit(item)

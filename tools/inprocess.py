@@ -39,10 +39,10 @@ class InProcessRun:
 def run_inprocess(world: World, program: Program, steps: int, detector: DropDetector | None = None,
                   on_output: Callable[[Any], None] | None = None,
                   stop_when: Callable[[InProcessRun], bool] | None = None,
-                  controls: dict[int, Control] | None = None,
+                  perturb: Callable[[int], Control | None] | None = None,
                   on_step: Callable[[int, Observation], None] | None = None) -> InProcessRun:
-    """`controls[k]` is applied to the world after step k is answered (as a live perturbation
-    would arrive between steps); `on_step(k, obs)` sees every observation."""
+    """`perturb(k)` may return a Control, applied to the world after step k is answered (as a live
+    perturbation arrives between steps); `on_step(k, obs)` sees every observation."""
     run = InProcessRun()
     answers: list[Any] = []
 
@@ -66,8 +66,9 @@ def run_inprocess(world: World, program: Program, steps: int, detector: DropDete
         answers.clear()
         link.answer(obs)
         act = answers[-1]
-        if controls and k in controls:
-            world.perturb(controls[k])
+        ctl = perturb(k) if perturb is not None else None
+        if ctl is not None:
+            world.perturb(ctl)
             link.truth = world.truth()
         if res.done or act.reset:
             start = act.start if act.reset else -1

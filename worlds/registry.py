@@ -17,6 +17,12 @@ def _gridworld_barrier(world_id: str, seed: int, params: Mapping[str, Any]) -> W
     return _gridworld(world_id, seed, {**params, "barrier": "true"})
 
 
+def _retina(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
+    from worlds.retina import RetinaWorld
+
+    return RetinaWorld.from_params(world_id, seed, params)
+
+
 def _bench(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
     from worlds.bench import BenchWorld
 
@@ -26,6 +32,7 @@ def _bench(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
 WORLDS: dict[str, Callable[[str, int, Mapping[str, Any]], World]] = {
     "gridworld": _gridworld,
     "gridworld-barrier": _gridworld_barrier,
+    "retina": _retina,
     "bench": _bench,
 }
 

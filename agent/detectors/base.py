@@ -30,6 +30,12 @@ class DropDetector(abc.ABC):
     @abc.abstractmethod
     def statistic(self) -> float: ...
 
+    @property
+    def reference(self) -> float:
+        """The reference (pre-drop) mean the detector compares with; NaN before it has one."""
+        ref = getattr(self, "_ref", None)
+        return ref.mean if ref is not None and ref.count else float("nan")
+
     @abc.abstractmethod
     def reset(self) -> None: ...
 

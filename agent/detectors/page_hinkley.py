@@ -1,27 +1,32 @@
-"""Page-Hinkley test in "down" mode, on standardised rewards: m_t = sum (xbar - x_i)/sigma - delta,
-a drop is declared when m_t - min_{s<=t} m_s > threshold. xbar and sigma come from the reference
-regime, which follows the stream `lag` steps late."""
+"""Page-Hinkley test (Page 1954; Hinkley 1971) in "down" mode: m_t = sum_i (xbar_i - x_i)/sigma - delta
+with xbar_i the mean of all samples since the last detection (the classic form; against a known
+reference mean it would coincide with CUSUM), and a drop when m_t - min_s m_s > threshold.
+sigma is the standard deviation over the warm-up samples."""
 
 from __future__ import annotations
 
-from agent.detectors.base import DropDetector, RunningMoments
+import math
+
+from agent.detectors.base import DropDetector
 
 
 class PageHinkley(DropDetector):
     name = "page_hinkley"
 
-    def __init__(self, delta: float = 0.5, threshold: float = 9.0, warmup: int = 100, rate: float = 0.002) -> None:
+    def __init__(self, delta: float = 0.25, threshold: float = 16.0, warmup: int = 100) -> None:
         super().__init__()
-        if delta < 0 or threshold <= 0:
-            raise ValueError("delta must be >= 0 and threshold > 0")
-        self.delta, self.threshold = delta, threshold
-        self._ref = RunningMoments(warmup, rate)
+        if delta < 0 or threshold <= 0 or warmup < 2:
+            raise ValueError("delta must be >= 0, threshold > 0 and warmup >= 2")
+        self.delta, self.threshold, self.warmup = delta, threshold, warmup
         self.reset()
 
     def reset(self) -> None:
         self.n = 0
         self.drift_detected = False
-        self._ref.reset()
+        self._count = 0
+        self._mean = 0.0
+        self._m2 = 0.0
+        self._sd = 1.0
         self._m = 0.0
         self._min = 0.0
 
@@ -29,16 +34,21 @@ class PageHinkley(DropDetector):
     def statistic(self) -> float:
         return self._m - self._min
 
+    @property
+    def reference(self) -> float:
+        return self._mean if self._count else float("nan")
+
     def _update(self, x: float) -> bool:
-        ref = self._ref
-        if not ref.ready:
-            ref.push(x)
+        self._count += 1
+        d = x - self._mean
+        self._mean += d / self._count
+        self._m2 += d * (x - self._mean)
+        if self._count <= self.warmup:
+            self._sd = math.sqrt(max(self._m2 / max(self._count - 1, 1), 1e-12))
             return False
-        self._m += -ref.z(x) - self.delta
+        self._m += (self._mean - x) / self._sd - self.delta
         self._min = min(self._min, self._m)
         if self._m - self._min > self.threshold:
-            self._m = self._min = 0.0
-            ref.reset()
+            self.reset()
             return True
-        ref.push(x)
         return False

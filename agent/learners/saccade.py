@@ -56,6 +56,7 @@ class SaccadeLearner:
         self.rng = np.random.default_rng(self.seed)
         self.pi = self.rng.uniform(self.low, self.high, (self.n_fields, self.low.size)) * self.init_spread
         self.R = np.zeros(self.n_fields)
+        self.experience = np.zeros(self.n_fields)  # summed pre-saccade activation: how much each field has learned from
         self.r_ref = 0.0
         self.updates = 0
         self.resets = 0
@@ -108,4 +109,5 @@ class SaccadeLearner:
             self.R = np.where(better, self.R + step * (reward - self.R), self.R)
         w = np.where(better, step, 0.0)[:, None]
         self.pi += w * (a - self.pi)
+        self.experience += d
         self.updates += 1

@@ -1,7 +1,7 @@
 """The retina program (ch. 4): learn saccades with the factored learner, publish the ballistic
 embedding (learned field positions -pi_k) periodically and after every relearning.
 
-Ballistic traces have length 1, so the trace distance between fields i and j is
+Only fields the agent has experienced are embedded (see `embedding`). Ballistic traces have length 1, so the trace distance between fields i and j is
 ||pi_i - pi_j|| and classical MDS of those distances is -pi up to a rigid motion; the program
 publishes -pi_k directly (motor units, so E_geometry can be measured without alignment) and, as
 eigenvalues, the MDS spectrum of those distances (the eigenvalues of the centred scatter matrix).
@@ -26,7 +26,8 @@ class RetinaProgram(Program):
 
     def __init__(self, spec: WorldSpec, seed: int = 0, rule: str = "robust", exploration: str = "gamma",
                  alpha: float = 0.5, noise_sd: float | None = None, embed_every: int = 1000,
-                 settle_min: int = 500, settle_window: int = 200, settle_gain: float = 0.03) -> None:
+                 settle_min: int = 1000, settle_window: int = 300, settle_gain: float = 0.03,
+                 min_experience: float = 1.0) -> None:
         super().__init__(spec, seed)
         a = spec.action_space
         if a.discrete or a.dims != 2:
@@ -35,13 +36,14 @@ class RetinaProgram(Program):
         self.learner = SaccadeLearner(self.n, np.array(a.low), np.array(a.high), alpha=alpha, noise_sd=noise_sd,
                                       rule=rule, exploration=exploration, seed=seed)
         self.embed_every = embed_every
+        self.min_experience = min_experience
         self.settle_min, self.settle_window, self.settle_gain = settle_min, settle_window, settle_gain
         self.episodes = 0
         self.version = 0
         self._pre: np.ndarray | None = None
         self._action: np.ndarray | None = None
         self._rewards: list[float] = []
-        self._drop: tuple[int, int] | None = None  # (step, episode) of the drop being relearned
+        self._drop: tuple[int, int, float] | None = None  # (step, episode, reward before) of the drop
 
     def _fields(self, obs: Observation) -> np.ndarray:
         f = obs.tensors["fields"].reshape(-1)
@@ -50,21 +52,33 @@ class RetinaProgram(Program):
         return f
 
     def embedding(self, trigger: str, step: int) -> EmbeddingOutput:
-        X = self.learner.positions
+        """Fields that have not yet been lit (summed activation < min_experience) still hold their
+        random initial preference: they are left out, and n_points says how many are in."""
+        ids = np.flatnonzero(self.learner.experience >= self.min_experience)
+        if ids.size < 3:
+            ids = np.arange(self.n)
+        X = self.learner.positions[ids]
         Xc = X - X.mean(axis=0)
         eig = np.sort(np.linalg.eigvalsh(Xc.T @ Xc))[::-1]
         recent = self._rewards[-self.settle_window:]
-        return EmbeddingOutput(trigger, tuple(range(self.n)), X.copy(), tuple(float(e) for e in eig), step,
+        return EmbeddingOutput(trigger, tuple(int(i) for i in ids), X.copy(), tuple(float(e) for e in eig), step,
                                {"episodes": float(self.episodes), "reward_mean": float(np.mean(recent)) if recent else 0.0,
                                 "resets": float(self.learner.resets)}, absolute=True)
 
     def _settled(self) -> bool:
+        """Back to 90 % of the reward before the drop, or (when that level is out of reach, as
+        after a lesion) no gain of more than `settle_gain` between the last two windows."""
         since = self.episodes - self._drop[1]
         w = self.settle_window
+        if since < w:
+            return False
+        now = float(np.mean(self._rewards[-w:]))
+        if now >= 0.9 * self._drop[2]:
+            return True
         if since < max(self.settle_min, 2 * w):
             return False
-        now, before = np.mean(self._rewards[-w:]), np.mean(self._rewards[-2 * w:-w])
-        return bool(now <= before * (1 + self.settle_gain) + 1e-9)
+        before = float(np.mean(self._rewards[-2 * w:-w]))
+        return now <= before * (1 + self.settle_gain) + 1e-9
 
     def act(self, obs: Observation) -> Decision:
         f = self._fields(obs)
@@ -94,7 +108,8 @@ class RetinaProgram(Program):
 
     def on_drop(self, step: int) -> None:
         self.learner.reset_estimates()
-        self._drop = (step, self.episodes)
+        before = self._rewards[-2 * self.settle_window:-50] or self._rewards
+        self._drop = (step, self.episodes, float(np.mean(before)) if before else 0.0)
         self.emit(EventOutput("relearning", "reward estimates reset; exploration raised", step))
 
     def world_restarted(self) -> None:

@@ -1,0 +1,54 @@
+"""`sme perturb KIND --world ID`: change a running world's body or sensors. The agent is not told."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from protocol import codec, keys
+from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from protocol.messages import Control
+from tools.common import parse_params
+
+KINDS = {
+    "lesion": "retina: fields within --param radius=R px of (u, v) px read 0 (default a small off-centre part "
+              "of the fovea: u=3 v=3 radius=2.5)",
+    "reverse": "retina: swap up/down motor commands (again to restore)",
+    "noise": "retina: additive sensor noise, --param sd=0.05",
+    "heal": "undo every perturbation",
+    "morph": "mountain car/vergence: change the body, e.g. --param baseline=1.4 or --param vertical=true",
+}
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("perturb", help="perturb a running world (lesion, reverse, noise, heal, morph)",
+                       description="Publish a Control message to a running world. Kinds: "
+                       + "; ".join(f"{k}: {v}" for k, v in KINDS.items())
+                       + ". The agent is not told: it has to notice the change from its own reward.")
+    p.add_argument("kind", help="perturbation kind: " + ", ".join(KINDS))
+    p.add_argument("--world", required=True, help="id of the running world")
+    p.add_argument("--param", action="append", metavar="K=V", help="perturbation parameter, repeatable")
+    add_bus_arguments(p, "tool")
+    p.set_defaults(func=main_args)
+
+
+def main_args(args: argparse.Namespace) -> int:
+    try:
+        keys.check_id(args.world, "world id")
+    except ValueError as e:
+        print(f"sme perturb: {e}", file=sys.stderr)
+        return 2
+    ctl = Control(args.world, args.kind, parse_params(args.param), time.time_ns() & 0xFFFFFFFF, time.time())
+    try:
+        with Bus(bus_config_from_args(args, "tool")) as bus:
+            if not bus.alive(keys.alive_world(args.world), timeout=2.0):
+                print(f"sme perturb: no world {args.world!r} is alive on the bus (see `sme status`)", file=sys.stderr)
+                return 1
+            bus.put(keys.world_ctl(args.world), codec.encode(ctl), codec.schema_name(Control))
+            time.sleep(0.2)  # let the put leave before the session closes
+    except BusError as e:
+        print(f"sme perturb: {e}", file=sys.stderr)
+        return 2
+    print(f"sent {args.kind} {dict(ctl.params) or ''} to world {args.world}")
+    return 0
