@@ -176,7 +176,7 @@ class WorldLink:
                 c.drops += 1
                 self.event("drop_detected", f"{self.detector.name} saw the reward drop (now {perf:.4g}, "
                            f"reference {ref:.4g})", obs.step, {"reward": perf, "reference": ref})
-            self.program.on_drop(obs.step)
+                self.program.on_drop(obs.step)
         for item in self.program.drain():
             self._emit(item)
         return act

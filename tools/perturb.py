@@ -13,7 +13,7 @@ from tools.common import parse_params
 
 KINDS = {
     "lesion": "retina: fields within --param radius=R px of (u, v) px read 0 (default a small off-centre part "
-              "of the fovea: u=3 v=3 radius=2.5)",
+              "of the fovea: u=6 v=0 radius=6)",
     "reverse": "retina: swap up/down motor commands (again to restore)",
     "noise": "retina: additive sensor noise, --param sd=0.05",
     "heal": "undo every perturbation",

@@ -206,9 +206,9 @@ class RetinaWorld(World):
     def perturb(self, control: Control) -> str:
         k, prm = control.kind, control.params
         if k == "lesion":
-            u = param(prm, "u", 3.0, float)
-            v = param(prm, "v", 3.0, float)
-            r = param(prm, "radius", 2.5, float)
+            u = param(prm, "u", 6.0, float)
+            v = param(prm, "v", 0.0, float)
+            r = param(prm, "radius", 6.0, float)
             hit = np.hypot(self.centres[:, 0] - u, self.centres[:, 1] - v) <= r
             self.lesion |= hit
             return f"lesion: {int(hit.sum())} fields within {r} px of ({u}, {v}) px now read 0"

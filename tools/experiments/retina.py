@@ -23,22 +23,34 @@ from worlds.retina import RetinaWorld
 EVAL_SEED = 999
 
 
-def saccade_errors(world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int = EVAL_SEED) -> tuple[float, float]:
-    """Mean distance (px) of the target from the retina centre after one and after two greedy
-    saccades, from `n` seeded random repositions. The world's state is restored afterwards."""
+@dataclass(frozen=True)
+class Evaluation:
+    one: float         # px from the centre after one greedy saccade (mean over repositions)
+    two: float         # ... after two
+    activation: float  # post-saccade activation (reward) of the first greedy saccade
+
+
+def evaluate(world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int = EVAL_SEED) -> Evaluation:
+    """Greedy saccades (no exploration, no learning) from `n` seeded random repositions, as the
+    dissertation's tests every 100 training steps. The world's state is restored afterwards."""
     saved = (world.pan, world.tilt, world.rng)
     world.rng = np.random.default_rng(seed)
-    one, two = [], []
+    one, two, act = [], [], []
     try:
         for _ in range(n):
             f = world.reset().tensors["fields"]
-            world.step(program.learner.greedy(f))
+            act.append(world.step(program.learner.greedy(f)).reward)
             one.append(float(np.linalg.norm(world.target_offset_px())))
             world.step(program.learner.greedy(world.render()))
             two.append(float(np.linalg.norm(world.target_offset_px())))
     finally:
         world.pan, world.tilt, world.rng = saved
-    return float(np.mean(one)), float(np.mean(two))
+    return Evaluation(float(np.mean(one)), float(np.mean(two)), float(np.mean(act)))
+
+
+def saccade_errors(world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int = EVAL_SEED) -> tuple[float, float]:
+    e = evaluate(world, program, n, seed)
+    return e.one, e.two
 
 
 def e_geometry_px(world: RetinaWorld, program: RetinaProgram) -> float:
@@ -53,7 +65,15 @@ class Curve:
     steps: list[int] = field(default_factory=list)
     one: list[float] = field(default_factory=list)
     two: list[float] = field(default_factory=list)
+    activation: list[float] = field(default_factory=list)
     geometry: list[float] = field(default_factory=list)
+
+    def add(self, episode: int, e: Evaluation, geometry: float) -> None:
+        self.steps.append(episode)
+        self.one.append(e.one)
+        self.two.append(e.two)
+        self.activation.append(e.activation)
+        self.geometry.append(geometry)
 
 
 def make(seed: int, rule: str = "robust", supersample: int = 2, **program_kw) -> tuple[RetinaWorld, RetinaProgram]:
@@ -62,28 +82,23 @@ def make(seed: int, rule: str = "robust", supersample: int = 2, **program_kw) ->
     return world, program
 
 
-def learning(seed: int, steps: int = 5000, every: int = 500, rule: str = "robust", supersample: int = 2,
-             n_eval: int = 30) -> Curve:
-    """`steps` counts training saccades (episodes), as in the dissertation."""
-    world, program = make(seed, rule, supersample, embed_every=10**9)
-    curve = Curve()
-
+def _evaluator(world: RetinaWorld, program: RetinaProgram, curve: Curve, every: int, n_eval: int):
     def on_step(k: int, obs: Observation) -> None:
         ep = program.episodes
-        if obs.t == 0 and ep % every == 0 and ep > 0 and (not curve.steps or curve.steps[-1] != ep):
-            one, two = saccade_errors(world, program, n_eval)
-            curve.steps.append(ep)
-            curve.one.append(one)
-            curve.two.append(two)
-            curve.geometry.append(e_geometry_px(world, program))
+        if obs.t == 0 and ep % every == 0 and (not curve.steps or curve.steps[-1] != ep):
+            curve.add(ep, evaluate(world, program, n_eval), e_geometry_px(world, program))
 
-    one, two = saccade_errors(world, program, n_eval)
-    curve.steps.append(0), curve.one.append(one), curve.two.append(two)
-    curve.geometry.append(e_geometry_px(world, program))
+    return on_step
+
+
+def learning(seed: int, steps: int = 5000, every: int = 500, rule: str = "robust", supersample: int = 2,
+             n_eval: int = 30, exploration: str = "gamma") -> Curve:
+    """Greedy evaluation every `every` training saccades; `steps` counts training saccades
+    (episodes), as in the dissertation."""
+    world, program = make(seed, rule, supersample, embed_every=10**9, exploration=exploration)
+    curve = Curve()
     with world:
-        run_inprocess(world, program, 2 * steps + 1, on_step=on_step)
-        if curve.steps[-1] != program.episodes:
-            on_step(0, Observation("", 0, 0, 0, {}))
+        run_inprocess(world, program, 2 * steps + 1, on_step=_evaluator(world, program, curve, every, n_eval))
     return curve
 
 
@@ -103,11 +118,17 @@ class PerturbationRun:
     drop_episodes: list[int]      # episodes at which the link's detector fired
     world: RetinaWorld
     program: RetinaProgram
+    curve: Curve
 
 
 def perturbation(seed: int, kind: str, at: int, steps: int, rule: str = "robust", detector: str | None = "cusum",
-                 supersample: int = 2, params: dict | None = None, embed_every: int = 1000) -> PerturbationRun:
-    world, program = make(seed, rule, supersample, embed_every=embed_every)
+                 supersample: int = 2, params: dict | None = None, embed_every: int = 1000,
+                 exploration: str = "gamma", every: int | None = None, n_eval: int = 30) -> PerturbationRun:
+    """Train for `steps` saccades, perturb right after saccade `at`. With `every`, greedy
+    evaluations (Curve) are made every `every` saccades."""
+    world, program = make(seed, rule, supersample, embed_every=embed_every, exploration=exploration)
+    curve = Curve()
+    evaluator = _evaluator(world, program, curve, every, n_eval) if every else None
     rewards: list[float] = []
     drops: list[int] = []
     at_step: list[int] = []
@@ -117,6 +138,8 @@ def perturbation(seed: int, kind: str, at: int, steps: int, rule: str = "robust"
             rewards.append(obs.reward)
             if len(rewards) == at:
                 at_step.append(k)
+        if evaluator is not None:
+            evaluator(k, obs)
 
     def on_output(msg) -> None:
         if getattr(msg, "kind", None) == "drop_detected":
@@ -131,7 +154,7 @@ def perturbation(seed: int, kind: str, at: int, steps: int, rule: str = "robust"
     with world:
         run = run_inprocess(world, program, 2 * steps + 1, detector=det, on_step=on_step, on_output=on_output,
                             perturb=perturb)
-    return PerturbationRun(rewards, at, run, drops, world, program)
+    return PerturbationRun(rewards, at, run, drops, world, program, curve)
 
 
 def relearn_episodes(rewards: list[float], at: int, frac: float = 0.9, pre: int = 500, window: int = 200) -> int | None:

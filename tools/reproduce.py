@@ -1,0 +1,206 @@
+"""`sme reproduce CHAPTER`: rerun a dissertation experiment, seeded, and write its table and plots.
+
+Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and barrier, random policy)
+and `retina` (ch. 4: saccade learning curves, lesion with the basic vs robust rule, reversal
+detected by the agent itself). Runs go to worker processes (spawned); results are written to
+OUT/CHAPTER/results.json, table.md and PNG plots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import sys
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+
+def _mean_se(x: list[float] | np.ndarray) -> tuple[float, float]:
+    a = np.asarray(x, dtype=np.float64)
+    return float(a.mean()), float(a.std(ddof=1) / np.sqrt(a.size)) if a.size > 1 else 0.0
+
+
+def _fmt(ms: tuple[float, float], digits: int = 2) -> str:
+    return f"{ms[0]:.{digits}f} ± {ms[1]:.{digits}f}"
+
+
+# --- jobs (top-level functions: picklable for worker processes) ----------------------------------
+
+def job_grid(seed: int, barrier: bool, steps: int, policy: str = "lspi") -> dict:
+    from agent.programs.gridworld import GridworldProgram
+    from tools.inprocess import run_inprocess
+    from worlds.gridworld import GridWorld
+
+    w = GridWorld(seed=seed, barrier=barrier)
+    p = GridworldProgram(w.spec(), seed=seed, policy=policy, samples_per_iteration=400 if policy == "lspi" else 50)
+    run = run_inprocess(w, p, steps)
+    return {"seed": seed, "barrier": barrier, "policy": policy, "errors": [float(e) for e in run.errors]}
+
+
+def job_learning(seed: int, steps: int, every: int, supersample: int) -> dict:
+    from tools.experiments import retina as R
+
+    c = R.learning(seed, steps=steps, every=every, supersample=supersample)
+    return {"seed": seed, "steps": c.steps, "one": c.one, "two": c.two, "activation": c.activation,
+            "geometry": c.geometry}
+
+
+def job_lesion(seed: int, rule: str, at: int, steps: int, every: int, supersample: int) -> dict:
+    from tools.experiments import retina as R
+
+    r = R.perturbation(seed, "lesion", at=at, steps=steps, rule=rule, detector=None, supersample=supersample,
+                       exploration="gaussian", every=every, embed_every=10**9)
+    return {"seed": seed, "rule": rule, "steps": r.curve.steps, "activation": r.curve.activation,
+            "train_reward": R.moving_average(r.rewards, 200)[::every].tolist()}
+
+
+def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
+    from tools.experiments import retina as R
+
+    r = R.perturbation(seed, "reverse", at=at, steps=steps, supersample=supersample)
+    embs = [{"version": e.version, "trigger": e.trigger, "procrustes_error": e.procrustes_error,
+             "step": e.step, "n_points": int(e.coordinates.shape[0])} for e in r.run.embeddings]
+    after = [d for d in r.drop_episodes if d >= at]
+    return {"seed": seed, "detection_delay": (after[0] - at) if after else None,
+            "false_alarms": sum(d < at for d in r.drop_episodes),
+            "relearn_episodes": R.relearn_episodes(r.rewards, at), "embeddings": embs,
+            "reward_ma": R.moving_average(r.rewards, 200)[::50].tolist()}
+
+
+def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
+    if workers <= 1:
+        return [fn(*j) for j in jobs]
+    with mp.get_context("spawn").Pool(workers) as pool:
+        return pool.starmap(fn, jobs)
+
+
+# --- chapters ------------------------------------------------------------------------------------
+
+def gridworld(runs: int, quick: bool, workers: int, out: str) -> dict:
+    steps = 8000 if quick else 20000
+    jobs = [(s, b, steps) for b in (False, True) for s in range(runs)] + [(s, False, 10000, "random") for s in range(runs)]
+    res = _pool_map(job_grid, jobs, workers)
+    table = []
+    for name, sel in (("plain", lambda r: not r["barrier"] and r["policy"] == "lspi"),
+                      ("barrier", lambda r: r["barrier"]), ("random policy", lambda r: r["policy"] == "random")):
+        rs = [r for r in res if sel(r)]
+        final = [r["errors"][-1] for r in rs]
+        first = [r["errors"][0] for r in rs]
+        table.append({"case": name, "first": _mean_se(first), "final": _mean_se(final), "runs": len(rs)})
+    lines = ["| case | Procrustes error, first embedding | final | runs |", "|---|---|---|---|"]
+    lines += [f"| {t['case']} | {_fmt(t['first'], 4)} | {_fmt(t['final'], 4)} | {t['runs']} |" for t in table]
+    _plot(out, "gridworld_lspi.png", "Procrustes error per LSPI iteration (Fig 5.4)", "LSPI iteration",
+          "Procrustes error", [(f"{'barrier' if r['barrier'] else 'plain'} seed {r['seed']}",
+                                list(range(1, len(r["errors"]) + 1)), r["errors"]) for r in res if r["policy"] == "lspi"],
+          logy=True)
+    return {"results": res, "table": table, "markdown": "\n".join(lines)}
+
+
+def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2) -> dict:
+    L = dict(steps=1500, every=250) if quick else dict(steps=5000, every=100)
+    les = dict(at=1000, steps=2500, every=250) if quick else dict(at=2000, steps=6000, every=250)
+    rev = dict(at=2000, steps=4500) if quick else dict(at=4000, steps=8000)
+    learning = _pool_map(job_learning, [(s, L["steps"], L["every"], supersample) for s in range(runs)], workers)
+    lesion = _pool_map(job_lesion, [(s, rule, les["at"], les["steps"], les["every"], supersample)
+                                    for rule in ("basic", "robust") for s in range(runs)], workers)
+    reversal = _pool_map(job_reversal, [(s, rev["at"], rev["steps"], supersample) for s in range(runs)], workers)
+
+    one = _mean_se([r["one"][-1] for r in learning])
+    two = _mean_se([r["two"][-1] for r in learning])
+    geo0 = _mean_se([r["geometry"][0] for r in learning])
+    geo = _mean_se([r["geometry"][-1] for r in learning])
+    end = {rule: _mean_se([np.mean(r["activation"][-4:]) for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")}
+    post = {rule: _mean_se([np.mean([a for s, a in zip(r["steps"], r["activation"]) if s > les["at"]])
+                            for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")}
+    delays = [r["detection_delay"] for r in reversal]
+    relearn = [r["relearn_episodes"] for r in reversal]
+    relearned = [any(e["trigger"].startswith("relearned") for e in r["embeddings"]) for r in reversal]
+    lines = [
+        f"Retina (ch. 4): {runs} seeded runs; mean ± standard error.", "",
+        "| measure | ours | dissertation |", "|---|---|---|",
+        f"| 1-saccade error after {L['steps']} steps (px) | {_fmt(one)} | about 5 |",
+        f"| 2-saccade error after {L['steps']} steps (px) | {_fmt(two)} | lower than 1 saccade |",
+        f"| E_geometry (px), start → after {L['steps']} steps | {_fmt(geo0)} → {_fmt(geo)} | falls with training |",
+        f"| lesion at {les['at']}: greedy post-saccade activation at the end, basic rule | {_fmt(end['basic'], 1)} | does not adapt |",
+        f"| lesion at {les['at']}: same, robust rule | {_fmt(end['robust'], 1)} | recovers |",
+        f"| lesion: mean activation over all post-lesion evaluations, basic / robust | {_fmt(post['basic'], 1)} / {_fmt(post['robust'], 1)} | |",
+        f"| reversal at {rev['at']}: detection delay (saccades), per run | {delays} | about 1000 |",
+        f"| reversal: saccades to 90 % of pre-reversal reward, per run | {relearn} | |",
+        f"| reversal: a 'relearned' embedding was published, per run | {relearned} | |",
+    ]
+    xs = learning[0]["steps"]
+    _plot(out, "retina_learning.png", "Saccade error while learning (Fig 4.3)", "training saccades", "px",
+          [("1 saccade", xs, np.mean([r["one"] for r in learning], axis=0)),
+           ("2 saccades", xs, np.mean([r["two"] for r in learning], axis=0)),
+           ("E_geometry", xs, np.mean([r["geometry"] for r in learning], axis=0))])
+    _plot(out, "retina_lesion.png", f"Greedy post-saccade activation, lesion at {les['at']} (Fig 4.4)",
+          "training saccades", "activation",
+          [(rule, lesion[0]["steps"], np.mean([r["activation"] for r in lesion if r["rule"] == rule], axis=0))
+           for rule in ("basic", "robust")], vline=les["at"])
+    _plot(out, "retina_reversal.png", f"Reward (moving average), reversal at {rev['at']} (Fig 4.5)",
+          "training saccades", "post-saccade reward",
+          [(f"seed {r['seed']}", list(range(0, 50 * len(r["reward_ma"]), 50)), r["reward_ma"]) for r in reversal],
+          vline=rev["at"])
+    return {"learning": learning, "lesion": lesion, "reversal": reversal, "markdown": "\n".join(lines),
+            "summary": {"one": one, "two": two, "geometry_start": geo0, "geometry_end": geo, "lesion_end": end,
+                        "lesion_post_mean": post, "detection_delays": delays, "relearn_episodes": relearn}}
+
+
+def _plot(out: str, name: str, title: str, xlabel: str, ylabel: str, series, logy: bool = False,
+          vline: float | None = None) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    for label, x, y in series:
+        ax.plot(x, y, label=label, lw=1.2)
+    if vline is not None:
+        ax.axvline(vline, color="k", ls="--", lw=0.8)
+    if logy:
+        ax.set_yscale("log")
+    ax.set(title=title, xlabel=xlabel, ylabel=ylabel)
+    if len(series) <= 12:
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, name), dpi=110)
+    plt.close(fig)
+
+
+CHAPTERS = {"gridworld": gridworld, "retina": retina}
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("reproduce", help="rerun a dissertation experiment (gridworld, retina)",
+                       description=__doc__)
+    p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")
+    p.add_argument("--runs", type=int, default=10, help="seeded runs per condition (default 10)")
+    p.add_argument("--quick", action="store_true", help="shortened runs, for a first look (about a minute)")
+    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes")
+    p.add_argument("--out", default="out", help="output folder (default ./out)")
+    p.set_defaults(func=main_args)
+
+
+def main_args(args: argparse.Namespace) -> int:
+    out = os.path.join(args.out, args.chapter)
+    os.makedirs(out, exist_ok=True)
+    t0 = time.time()
+    print(f"sme reproduce {args.chapter}: {args.runs} runs{' (quick)' if args.quick else ''}, "
+          f"{args.workers} workers, writing {out}/ ...", flush=True)
+    res = CHAPTERS[args.chapter](args.runs, args.quick, args.workers, out)
+    with open(os.path.join(out, "results.json"), "w") as f:
+        json.dump(res, f, default=float)
+    with open(os.path.join(out, "table.md"), "w") as f:
+        f.write(res["markdown"] + "\n")
+    print(res["markdown"])
+    print(f"\n({time.time() - t0:.0f} s; table.md, results.json and PNG plots in {out}/)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main_args(argparse.Namespace()))
