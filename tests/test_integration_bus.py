@@ -142,3 +142,33 @@ def test_daemon_checkpoint_resumes_after_kill(procs, endpoint, tmp_path):
     ln = wait_for(lambda: (ln := link(status(endpoint), "g4")) is not None
                   and ln.embedding_version > restored.embedding_version and ln, 60)
     assert ln and ln.last_procrustes_error < 0.05  # the first embedding after the restart is already good
+
+
+def test_retina_reversal_live_detected_relearned_and_reembedded(procs, endpoint):
+    """As a user would: agent, retina world, watch; `sme perturb reverse` mid-run; the agent notices
+    by itself, relearns and publishes an embedding whose trigger says why."""
+    procs.start("agent", "--listen", endpoint, "-q", "--program-param", "retina.embed_every=500")
+    procs.start("world", "retina", "--id", "r1", "--param", "supersample=1", "--connect", endpoint, "-q")
+    watch = procs.start("watch", "--json", "--timeout", "170", "--connect", endpoint)
+    rows: list[dict] = []
+
+    def follow():
+        for line in watch.stdout:
+            rows.append(json.loads(line))
+
+    threading.Thread(target=follow, daemon=True).start()
+    # learn for 2000 saccades (4 periodic embeddings), then reverse the up/down motor commands
+    assert wait_for(lambda: sum(r.get("type") == "embedding" for r in rows) >= 4, 90), rows
+    pert = procs.start("perturb", "reverse", "--world", "r1", "--connect", endpoint)
+    assert pert.wait(20) == 0
+    t_rev = max(r["step"] for r in rows if r.get("type") == "embedding")
+    assert wait_for(lambda: any(r.get("trigger", "").startswith("relearned") for r in rows), 120), \
+        [(r.get("kind"), r.get("trigger")) for r in rows]
+    drops = [r for r in rows if r.get("kind") == "drop_detected"]
+    assert len(drops) == 1 and drops[0]["step"] > t_rev
+    assert drops[0]["step"] - t_rev <= 2 * 500 + 2 * 300  # within 300 saccades of the reversal (plus the
+    # up to 500 saccades between the last embedding we saw and the perturbation): 2 steps per saccade
+    relearned = next(r for r in rows if r.get("trigger", "").startswith("relearned"))
+    assert relearned["step"] > drops[0]["step"] and relearned["n_points"] > 3000
+    kinds = [r.get("kind") for r in rows if r.get("type") == "event"]
+    assert kinds.index("drop_detected") < kinds.index("relearning") < kinds.index("relearned")

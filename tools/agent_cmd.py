@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import ast
 import logging
+from typing import Any
 import signal
 import threading
 
@@ -30,13 +32,36 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detector", default=DEFAULT_DETECTOR, choices=sorted(DETECTORS),
                    help=f"reward-drop detector run on each world link (default: {DEFAULT_DETECTOR}, chosen by "
                    "`sme bench detectors`)")
+    p.add_argument("--program-param", action="append", metavar="PROGRAM.K=V", default=None,
+                   help="a program hyperparameter, repeatable, e.g. retina.embed_every=500, retina.rule=basic, "
+                   "gridworld.samples_per_iteration=200")
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)")
     add_bus_arguments(p, "agent")
     add_verbosity(p)
     p.set_defaults(func=main_args)
 
 
+def parse_program_params(items: list[str] | None) -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {}
+    for item in items or []:
+        name, _, kv = item.partition(".")
+        key, eq, raw = kv.partition("=")
+        if not name or not key or not eq:
+            raise ValueError(f"--program-param expects PROGRAM.KEY=VALUE, got {item!r}")
+        try:
+            value: Any = ast.literal_eval(raw)
+        except (ValueError, SyntaxError):
+            value = raw
+        out.setdefault(name, {})[key] = value
+    return out
+
+
 def run_agent(args: argparse.Namespace) -> int:
+    try:
+        program_params = parse_program_params(args.program_param)
+    except ValueError as e:
+        log.error("%s", e)
+        return 2
     cfg = bus_config_from_args(args, "agent")
     try:
         bus = Bus(cfg)
@@ -45,7 +70,8 @@ def run_agent(args: argparse.Namespace) -> int:
         return 2
     with bus:
         daemon = AgentDaemon(bus, args.id, seed=args.seed, state_dir=args.state_dir,
-                             checkpoint_every=args.checkpoint_every, detector=args.detector)
+                             checkpoint_every=args.checkpoint_every, detector=args.detector,
+                             program_params=program_params)
         stop = threading.Event()
 
         def on_signal(signum, frame):  # noqa: ARG001

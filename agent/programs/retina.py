@@ -6,7 +6,7 @@ Only fields the agent has experienced are embedded (see `embedding`). Ballistic 
 publishes -pi_k directly (motor units, so E_geometry can be measured without alignment) and, as
 eigenvalues, the MDS spectrum of those distances (the eigenvalues of the centred scatter matrix).
 
-The daemon's drop detector watches the post-saccade reward (`performance`). On a drop the program
+The daemon's drop detector watches the (log) post-saccade reward (`performance`). On a drop the program
 resets its reward estimates (4.4.2), which raises exploration, relearns, and once the reward has
 settled publishes an embedding whose trigger names the drop.
 """
@@ -104,7 +104,11 @@ class RetinaProgram(Program):
         return Decision(reset=True)
 
     def performance(self, obs: Observation) -> float | None:
-        return float(obs.reward) if obs.t > 0 and obs.done else None
+        """log(1 + post-saccade activation): the activation is multiplicative and heavy-tailed
+        (its standard deviation exceeds its mean), so a reversal that cuts the median activation
+        eightfold is under one standard deviation on the raw scale but several on the log scale
+        (measured on recorded reversal streams: CUSUM delay 9-62 saccades on log1p, often none raw)."""
+        return float(np.log1p(max(obs.reward, 0.0))) if obs.t > 0 and obs.done else None
 
     def on_drop(self, step: int) -> None:
         self.learner.reset_estimates()
