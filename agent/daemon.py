@@ -8,6 +8,7 @@ again by a daemon started later.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import pickle
@@ -220,7 +221,15 @@ class AgentDaemon:
             link.start()
         how = f"restored from checkpoint at embedding v{link.version}" if saved else "new"
         log.info("world %s attached (%s, program %s, %s)", wid, spec.kind, program.name, how)
-        self.event(wid, "attached", f"{spec.kind} with program {program.name} ({how})")
+        self.event(wid, "attached", f"{spec.kind} with program {program.name} ({how}); config "
+                   + json.dumps(self.config(spec)))
+
+    def config(self, spec: WorldSpec) -> dict[str, Any]:
+        """What decides a link's behaviour besides its observations: with it, a recording replays
+        offline into the same embeddings."""
+        name = spec.program or spec.kind
+        return {"seed": self.seed, "detector": self.detector, "program": name,
+                "program_params": self.program_params.get(name, {})}
 
     def _detach(self, wid: str) -> None:
         link = self.links.get(wid)

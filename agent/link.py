@@ -200,5 +200,6 @@ class WorldLink:
 
     def status(self) -> LinkStatus:
         c = self.counters
+        stat = float(self.detector.statistic) if self.detector is not None else 0.0
         return LinkStatus(self.world_id, self.spec.kind, self.program.name, self.state, c.steps, c.episodes,
-                          self.version, c.reward_mean, dict(c.rejected), c.last_error)
+                          self.version, c.reward_mean, dict(c.rejected), c.last_error, stat, c.drops)

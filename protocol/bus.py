@@ -2,9 +2,11 @@
 
 Sessions are built from the flags zenoh's own examples use (`--mode`, `--connect`, `--listen`,
 `--config`, `--no-multicast-scouting`). The embedded default needs no router and no config: the
-agent daemon is a Zenoh *router* listening on tcp/127.0.0.1:7447, worlds are *peers* that keep
-retrying that endpoint until the agent appears, and query tools are *clients* that fail fast
-when no agent is reachable. Multicast scouting is off and nothing listens beyond loopback.
+agent daemon is a Zenoh *router* listening on tcp/127.0.0.1:7447 and every other process is a
+*client* of it (a router does not forward between peers, so clients are what lets a recorder or a
+viewer see world<->agent traffic). Worlds, recorders and viewers wait for the agent to appear
+(`retry`); query tools fail fast with a hint. Clients reconnect by themselves when the agent
+restarts. Multicast scouting is off and nothing listens beyond loopback.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import collections
 import json
 import logging
 import threading
+import time
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterator, NamedTuple
 
@@ -43,6 +46,7 @@ class BusConfig:
     config_file: str | None = None
     multicast_scouting: bool = False
     lease_ms: int | None = None
+    retry: bool = False  # client: wait for the router to appear instead of failing
 
     ROLES = ("agent", "world", "tool")
 
@@ -52,7 +56,7 @@ class BusConfig:
         if role == "agent":
             return cls(mode="router", connect=(), listen=(endpoint,))
         if role == "world":
-            return cls(mode="peer", connect=(endpoint,), listen=())
+            return cls(mode="client", connect=(endpoint,), listen=(), retry=True)
         if role == "tool":
             return cls(mode="client", connect=(endpoint,), listen=())
         raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
@@ -72,7 +76,8 @@ class BusConfig:
 
     def describe(self) -> str:
         ends = ",".join(self.listen if self.mode == "router" else self.connect) or "-"
-        return f"{self.mode} {'listening on' if self.mode == 'router' else 'connecting to'} {ends}"
+        wait = " (waits for it)" if self.retry and self.mode == "client" else ""
+        return f"{self.mode} {'listening on' if self.mode == 'router' else 'connecting to'} {ends}{wait}"
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser, role: str) -> None:
@@ -105,6 +110,8 @@ def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
         cfg = replace(cfg, listen=tuple(args.listen))
     if args.config:
         cfg = replace(cfg, config_file=args.config)
+    if cfg.mode != "client":
+        cfg = replace(cfg, retry=False)
     return replace(cfg, multicast_scouting=bool(args.multicast_scouting and not args.no_multicast_scouting))
 
 
@@ -184,7 +191,7 @@ class Bus:
     def __init__(self, config: BusConfig) -> None:
         self.config = config
         try:
-            self._session = zenoh.open(config.zenoh_config())
+            self._session = self._open(config)
         except zenoh.ZError as e:
             hint = ""
             if config.mode == "client":
@@ -196,6 +203,22 @@ class Bus:
         self._declared: list[Any] = []
         self._lock = threading.Lock()
         self._closed = False
+
+    @staticmethod
+    def _open(config: BusConfig) -> "zenoh.Session":
+        zc = config.zenoh_config()
+        if not (config.retry and config.mode == "client"):
+            return zenoh.open(zc)
+        told = False
+        while True:
+            try:
+                return zenoh.open(zc)
+            except zenoh.ZError:
+                if not told:
+                    log.warning("waiting for the agent at %s (start `sme agent`; Ctrl-C gives up)",
+                                ", ".join(config.connect))
+                    told = True
+                time.sleep(0.5)
 
     # context manager ---------------------------------------------------------------------------
     def __enter__(self) -> "Bus":

@@ -178,7 +178,8 @@ def _enc_status(x: m.AgentStatus) -> pb.AgentStatus:
     for ln in x.links:
         q = p.links.add(world_id=ln.world_id, kind=ln.kind, program=ln.program, state=ln.state,
                         steps=ln.steps, episodes=ln.episodes, embedding_version=ln.embedding_version,
-                        reward_mean=ln.reward_mean, last_procrustes_error=ln.last_procrustes_error)
+                        reward_mean=ln.reward_mean, last_procrustes_error=ln.last_procrustes_error,
+                        detector_statistic=ln.detector_statistic, drops=ln.drops)
         q.rejected.update(ln.rejected)
     p.counters.update(x.counters)
     return p
@@ -245,7 +246,8 @@ def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:
 def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
     links = tuple(
         m.LinkStatus(ln.world_id, ln.kind, ln.program, ln.state, ln.steps, ln.episodes,
-                     ln.embedding_version, ln.reward_mean, dict(ln.rejected), ln.last_procrustes_error)
+                     ln.embedding_version, ln.reward_mean, dict(ln.rejected), ln.last_procrustes_error,
+                     ln.detector_statistic, ln.drops)
         for ln in p.links
     )
     return m.AgentStatus(p.agent_id, p.uptime, links, dict(p.counters), p.timestamp)
@@ -298,10 +300,27 @@ def schema_name(cls: type) -> str:
     return SCHEMA_NAMES[cls]
 
 
-def file_descriptor_set() -> bytes:
-    """The serialized FileDescriptorSet of the schema, for MCAP schema records."""
-    from google.protobuf import descriptor_pb2
+def descriptor_set(full_name: str) -> bytes:
+    """The serialized FileDescriptorSet (with dependencies) defining message `full_name`, as MCAP
+    protobuf schema records need. Knows sme.v1.* and foxglove.RawImage."""
+    from google.protobuf import descriptor_pb2, descriptor_pool
 
+    from protocol import images  # noqa: F401  (registers foxglove.RawImage in the default pool)
+
+    try:
+        desc = descriptor_pool.Default().FindMessageTypeByName(full_name)
+    except KeyError:
+        raise KeyError(f"unknown protobuf message {full_name!r}") from None
     fds = descriptor_pb2.FileDescriptorSet()
-    pb.DESCRIPTOR.CopyToProto(fds.file.add())
+    seen: set[str] = set()
+
+    def add(fd) -> None:
+        if fd.name in seen:
+            return
+        seen.add(fd.name)
+        for dep in fd.dependencies:
+            add(dep)
+        fd.CopyToProto(fds.file.add())
+
+    add(desc.file)
     return fds.SerializeToString()

@@ -137,6 +137,8 @@ class LinkStatus:
     reward_mean: float = 0.0
     rejected: dict[str, int] = field(default_factory=dict)
     last_procrustes_error: float = float("nan")
+    detector_statistic: float = 0.0
+    drops: int = 0
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tools import agent_cmd, demo, perturb, reproduce, status, watch, world_cmd
+from tools import agent_cmd, demo, perturb, record, replay, reproduce, status, view, watch, world_cmd
 from tools.bench import cli as bench_cli
 
 
@@ -16,8 +16,9 @@ def build_parser() -> argparse.ArgumentParser:
         "raw experience, over Eclipse Zenoh. Start with `sme demo`.",
     )
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    for mod in (agent_cmd, world_cmd, perturb, watch, status, demo, reproduce, bench_cli):
+    for mod in (agent_cmd, world_cmd, perturb, watch, status, record, replay, view, demo, reproduce, bench_cli):
         mod.add_parser(sub)
+    replay.add_recover_parser(sub)
     return p
 
 

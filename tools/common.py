@@ -70,7 +70,8 @@ def status_dict(s: AgentStatus) -> dict[str, Any]:
             "links": [{"world": ln.world_id, "kind": ln.kind, "program": ln.program, "state": ln.state,
                        "steps": ln.steps, "episodes": ln.episodes, "embedding_version": ln.embedding_version,
                        "reward_mean": round(ln.reward_mean, 6), "rejected": dict(ln.rejected),
-                       "last_procrustes_error": _num(ln.last_procrustes_error)} for ln in s.links]}
+                       "last_procrustes_error": _num(ln.last_procrustes_error),
+                       "detector_statistic": _num(ln.detector_statistic), "drops": ln.drops} for ln in s.links]}
 
 
 def format_embedding(e: Embedding) -> str:

@@ -52,6 +52,10 @@ class World(abc.ABC):
         """Ground truth for evaluation only (never fed to learners)."""
         return None
 
+    def frame(self) -> np.ndarray | None:
+        """The latest camera frame (uint8 [H, W] or [H, W, 3]) for viewers and recordings, if any."""
+        return None
+
     def close(self) -> None:
         pass
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from protocol import codec, keys
+from protocol import codec, images, keys
 from protocol.bus import Bus, BusMessage
 from protocol.errors import ProtocolError
 from protocol.messages import Action, Control, Observation, WorldSpec
@@ -31,6 +31,8 @@ class NodeStats:
     steps: int = 0
     episodes: int = 0
     resends: int = 0
+    published: int = 0          # observations put on the bus (resends included)
+    actions_received: int = 0   # valid actions received (duplicates and stale ones included)
     rejected: dict[str, int] = field(default_factory=dict)
     controls: int = 0
     latencies: list[float] = field(default_factory=list)
@@ -41,6 +43,7 @@ class NodeStats:
     def summary(self) -> dict:
         lat = np.asarray(self.latencies) * 1e3
         out = {"steps": self.steps, "episodes": self.episodes, "resends": self.resends,
+               "published": self.published, "actions_received": self.actions_received,
                "controls": self.controls, "rejected": dict(self.rejected), "seconds": round(self.seconds, 3),
                "steps_per_s": round(self.steps / self.seconds, 1) if self.seconds else 0.0}
         if self.measured_seconds:
@@ -86,7 +89,7 @@ class WorldNode:
 
     def __init__(self, world: World, bus: Bus, world_id: str | None = None, *, resend: float = 0.5,
                  max_steps: int | None = None, seconds: float | None = None, measure: bool = False,
-                 warmup: int = 0) -> None:
+                 warmup: int = 0, image_every: int = 10) -> None:
         self.world = world
         self.bus = bus
         self.world_id = keys.check_id(world_id or world.world_id, "world id")
@@ -95,6 +98,7 @@ class WorldNode:
         self.seconds = seconds
         self.measure = measure
         self.warmup = warmup
+        self.image_every = image_every
         self.session = secrets.token_hex(6)
         self.stats = NodeStats()
         self.stop_event = threading.Event()
@@ -116,6 +120,7 @@ class WorldNode:
         except ProtocolError as e:
             self._reject(e.kind, str(e))
             return
+        self.stats.actions_received += 1
         self._slot.offer(act)
 
     def _on_control(self, msg: BusMessage) -> None:
@@ -153,10 +158,16 @@ class WorldNode:
                 self._reject("bad_control", f"control {ctl.kind!r}: {e}")
 
     def _publish(self, pub, step: int, episode: int, t: int, res: StepResult, start: int) -> bytes:
+        now = time.time()
         obs = Observation(self.world_id, episode, step, t, res.tensors, float(res.reward), bool(res.done),
-                          start, time.time(), self.session)
+                          start, now, self.session)
         data = codec.encode(obs)
         pub.put(data)
+        self.stats.published += 1
+        if self._image_pub is not None and step % self.image_every == 0:
+            frame = self.world.frame()
+            if frame is not None:
+                self._image_pub.put(images.encode_image(frame, self.world_id, now))
         return data
 
     def install_signal_handlers(self) -> None:
@@ -181,6 +192,8 @@ class WorldNode:
         bus.subscribe(keys.world_act(wid), self._on_action)
         bus.subscribe(keys.world_ctl(wid), self._on_control)
         pub = bus.publisher(keys.world_obs(wid), codec.schema_name(Observation))
+        self._image_pub = (bus.publisher(keys.world_image(wid, "camera"), images.SCHEMA, block=False)
+                           if self.image_every > 0 and type(self.world).frame is not World.frame else None)
         bus.token(keys.alive_world(wid))
         log.info("world %s (%s) serving on the bus, session %s", wid, self.world.kind, self.session)
 
@@ -198,6 +211,7 @@ class WorldNode:
                 if self.stop_event.is_set():
                     break
                 self.stats.resends += 1
+                self.stats.published += 1
                 pub.put(data)  # the same bytes: receivers can tell a resend by its step
                 continue
             if self.measure and self.stats.steps >= self.warmup:

@@ -84,6 +84,7 @@ class RetinaWorld(World):
             math.degrees(2 * math.atan(math.tan(math.radians(fov_deg) / 2) / 2**L)), 1.0, 0.1, 2 * wall_distance)
             for L in range(layers)]
         self._res = res
+        self._frame: np.ndarray | None = None
 
     @classmethod
     def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "RetinaWorld":
@@ -143,12 +144,18 @@ class RetinaWorld(World):
             _, _, rgb, _, _ = c.getCameraImage(self._res, self._res, view, self._proj[L], shadow=0,
                                                renderer=p.ER_TINY_RENDERER, flags=p.ER_NO_SEGMENTATION_MASK)
             img = np.asarray(rgb, dtype=np.float32).reshape(self._res, self._res, 4)[..., :3].mean(axis=2) / 255.0
+            if L == 0:
+                self._frame = img
             acts.append(img.reshape(f, ss, f, ss).mean(axis=(1, 3)).ravel())
         a = np.concatenate(acts)[self.order]
         if self.noise_sd > 0:
             a = a + self.rng.normal(0.0, self.noise_sd, a.shape)
         a[self.lesion] = 0.0
         return np.clip(a, 0.0, 1.0).astype(np.float32)
+
+    def frame(self) -> np.ndarray | None:
+        """What the outermost layer sees (the whole 128-px retina), as 8-bit grey."""
+        return None if self._frame is None else (self._frame * 255).astype(np.uint8)
 
     def target_offset_px(self, index: int = 0) -> np.ndarray:
         """Where spot `index` is seen, in retina px from the centre (u right, v up)."""

@@ -1,0 +1,31 @@
+"""Camera frames as `foxglove.RawImage`, so that recordings open as images in Foxglove and Rerun."""
+
+from __future__ import annotations
+
+import numpy as np
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+SCHEMA = "foxglove.RawImage"
+
+
+def encode_image(frame: np.ndarray, frame_id: str, timestamp: float) -> bytes:
+    """uint8 [H, W] (mono8) or [H, W, 3] (rgb8) -> serialized foxglove.RawImage."""
+    a = np.ascontiguousarray(frame)
+    if a.dtype != np.uint8 or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3):
+        raise ValueError(f"frames are uint8 [H, W] or [H, W, 3], got {a.dtype}{list(a.shape)}")
+    m = RawImage(width=a.shape[1], height=a.shape[0], encoding="mono8" if a.ndim == 2 else "rgb8",
+                 step=a.shape[1] * (1 if a.ndim == 2 else 3), data=a.tobytes(), frame_id=frame_id)
+    m.timestamp.FromNanoseconds(int(timestamp * 1e9))
+    return m.SerializeToString()
+
+
+def decode_image(payload: bytes) -> np.ndarray:
+    m = RawImage()
+    m.ParseFromString(payload)
+    ch = {"mono8": 1, "rgb8": 3}.get(m.encoding)
+    if ch is None:
+        raise ValueError(f"unsupported image encoding {m.encoding!r}")
+    a = np.frombuffer(m.data, dtype=np.uint8)
+    if a.size != m.height * m.width * ch:
+        raise ValueError("image data does not match width x height")
+    return a.reshape((m.height, m.width) if ch == 1 else (m.height, m.width, 3))

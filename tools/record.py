@@ -1,0 +1,163 @@
+"""`sme record FILE.mcap`: record every message of a session into a self-describing MCAP file."""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import logging
+import signal
+import sys
+import threading
+import time
+from typing import Any
+
+from protocol import codec, keys
+from protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
+from protocol.messages import Truth, WorldSpec
+from tools.mcap_io import COMPRESSIONS, McapSink, Record, schema_of
+
+log = logging.getLogger("sme.record")
+
+
+class Recorder:
+    """Subscribes to `key_expr` and writes every message on one writer thread. Chunks are closed
+    and pushed to the file at least every `flush_every` seconds, and the file is unbuffered, so a
+    recorder killed with SIGKILL loses at most the last second (or chunk) of messages: what reached the
+    OS survives the kill. When a world
+    appears, its spec and truth (served by queryables, not published) are fetched and written too,
+    so a recording can be replayed into a fresh agent."""
+
+    def __init__(self, bus: Bus, path: str, key_expr: str = keys.ALL, compression: str = "zstd",
+                 chunk_size: int = 64 * 1024, flush_every: float = 1.0) -> None:
+        self.bus = bus
+        self.path = path
+        self.key_expr = key_expr
+        self.flush_every = flush_every
+        self._file = open(path, "wb")  # buffered: McapSink.flush() pushes it to the OS
+        self._sink = McapSink(self._file, compression, chunk_size)
+        self._queue: collections.deque[tuple[int, BusMessage]] = collections.deque()
+        self._cv = threading.Condition()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
+        self.received = 0
+        self.by_key: collections.Counter[str] = collections.Counter()
+        self.max_backlog = 0
+        self._worlds: set[str] = set()
+        self._seq = 0
+
+    def _on(self, msg: BusMessage) -> None:
+        if msg.kind != "put":
+            return
+        with self._cv:
+            self._queue.append((time.time_ns(), msg))
+            self.received += 1
+            self.max_backlog = max(self.max_backlog, len(self._queue))
+            self._cv.notify()
+
+    def _on_alive(self, key: str, alive: bool) -> None:
+        wid = keys.last_chunk(key)
+        if alive and wid not in self._worlds:
+            self._worlds.add(wid)
+            threading.Thread(target=self._fetch_world, args=(wid,), daemon=True).start()
+        elif not alive:
+            self._worlds.discard(wid)
+
+    def _fetch_world(self, wid: str) -> None:
+        for key, cls in ((keys.world_spec(wid), WorldSpec), (keys.world_truth(wid), Truth)):
+            try:
+                for r in self.bus.get(key, timeout=2.0):
+                    self._on(BusMessage(key, r.payload, f"application/protobuf;{codec.schema_name(cls)}"))
+            except BusError as e:
+                log.debug("world %s: %s", wid, e)
+
+    def start(self) -> "Recorder":
+        self._thread.start()
+        self.bus.subscribe(self.key_expr, self._on)
+        if self.key_expr in (keys.ALL, f"{keys.PREFIX}/**"):
+            self.bus.watch_alive(keys.ALL_ALIVE_WORLDS, self._on_alive, history=True)
+        return self
+
+    def _run(self) -> None:
+        last_flush = time.monotonic()
+        while True:
+            with self._cv:
+                if not self._queue:
+                    if self._stop.is_set():
+                        break
+                    self._cv.wait(0.2)
+                batch = list(self._queue)
+                self._queue.clear()
+            for t, msg in batch:
+                self._seq += 1
+                self._sink.write(Record(msg.key, schema_of(msg.encoding), t, msg.payload, self._seq))
+                self.by_key[msg.key] += 1
+            if time.monotonic() - last_flush >= self.flush_every:
+                self._sink.flush()
+                last_flush = time.monotonic()
+
+    @property
+    def written(self) -> int:
+        return self._sink.count
+
+    def stop(self) -> None:
+        """Write everything received, finish the file (summary and index), close it."""
+        self._stop.set()
+        with self._cv:
+            self._cv.notify_all()
+        self._thread.join()
+        self._sink.finish()
+        self._file.close()
+
+    def __enter__(self) -> "Recorder":
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("record", help="record a session to an MCAP file",
+                       description="Record every message on the bus (observations, actions, controls, truth, "
+                       "specs, embeddings, agent events, camera frames as foxglove.RawImage) into an MCAP file "
+                       "with its protobuf schemas embedded, so standard tools (mcap CLI, Foxglove, `rerun mcap "
+                       "convert`) read it. Chunks are flushed every second: a recorder killed with SIGKILL "
+                       "leaves a file `sme replay` reads up to its last complete chunk, and `sme recover` turns "
+                       "into a complete one. Stop with Ctrl-C or --seconds.")
+    p.add_argument("file", help="output .mcap file")
+    p.add_argument("--keys", default=keys.ALL, metavar="EXPR",
+                   help=f"zenoh key expression to record (default {keys.ALL})")
+    p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--compression", choices=sorted(COMPRESSIONS), default="zstd", help="chunk compression")
+    p.add_argument("--chunk-kb", type=int, default=64, help="chunk size in KB (smaller loses less on a kill)")
+    add_bus_arguments(p, "world")
+    p.set_defaults(func=main_args)
+
+
+def main_args(args: argparse.Namespace) -> int:
+    try:
+        bus = Bus(bus_config_from_args(args, "world"))
+    except BusError as e:
+        print(f"sme record: {e}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *a: stop.set())
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    t0 = time.monotonic()
+    with bus:
+        rec = Recorder(bus, args.file, args.keys, args.compression, args.chunk_kb * 1024).start()
+        print(f"sme record: recording {args.keys} to {args.file}; Ctrl-C stops", file=sys.stderr, flush=True)
+        next_tick = 5.0
+        while not stop.is_set():
+            el = time.monotonic() - t0
+            if args.seconds is not None and el >= args.seconds:
+                break
+            if el >= next_tick:
+                next_tick += 5.0
+                print(f"  {el:5.0f} s  {rec.written} messages written ({rec.received / el:,.0f}/s)", file=sys.stderr,
+                      flush=True)
+            stop.wait(0.1)
+        rec.stop()
+    el = time.monotonic() - t0
+    print(f"sme record: {rec.written} messages in {el:.1f} s ({rec.written / max(el, 1e-9):,.0f}/s), "
+          f"{len(rec.by_key)} channels, received {rec.received}, max backlog {rec.max_backlog}", file=sys.stderr)
+    return 0
