@@ -188,10 +188,11 @@ class Bus:
     """A Zenoh session with the few operations the project needs. Always use as a context manager:
     a session with declared callbacks keeps the interpreter alive until it is closed."""
 
-    def __init__(self, config: BusConfig) -> None:
+    def __init__(self, config: BusConfig, wait_limit: float | None = None) -> None:
+        """`wait_limit`: with `config.retry`, give up waiting for the router after this many seconds."""
         self.config = config
         try:
-            self._session = self._open(config)
+            self._session = self._open(config, wait_limit)
         except zenoh.ZError as e:
             hint = ""
             if config.mode == "client":
@@ -205,15 +206,18 @@ class Bus:
         self._closed = False
 
     @staticmethod
-    def _open(config: BusConfig) -> "zenoh.Session":
+    def _open(config: BusConfig, wait_limit: float | None) -> "zenoh.Session":
         zc = config.zenoh_config()
         if not (config.retry and config.mode == "client"):
             return zenoh.open(zc)
         told = False
+        deadline = None if wait_limit is None else time.monotonic() + wait_limit
         while True:
             try:
                 return zenoh.open(zc)
             except zenoh.ZError:
+                if deadline is not None and time.monotonic() >= deadline:
+                    raise
                 if not told:
                     log.warning("waiting for the agent at %s (start `sme agent`; Ctrl-C gives up)",
                                 ", ".join(config.connect))

@@ -115,7 +115,7 @@ def test_status_and_watch_fail_clearly_without_agent(procs, endpoint):
     assert st.returncode == 2 and "is `sme agent` running?" in st.stderr.read()
     w = procs.start("watch", "--count", "1", "--timeout", "1", "--connect", endpoint)
     w.wait(20)
-    assert w.returncode == 1 and "timed out" in w.stderr.read()
+    assert w.returncode == 2 and "is `sme agent` running?" in w.stderr.read()
 
 
 def test_world_waits_for_agent_and_stops_on_sigterm(procs, endpoint):

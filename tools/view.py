@@ -139,7 +139,7 @@ def main_args(args: argparse.Namespace) -> int:
         print(f"sme view: {log.logged} entities logged from {args.file}", file=sys.stderr)
         return 0
     try:
-        bus = Bus(bus_config_from_args(args, "world"))
+        bus = Bus(bus_config_from_args(args, "world"), wait_limit=args.seconds)
     except BusError as e:
         print(f"sme view: {e}", file=sys.stderr)
         return 2

@@ -35,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def main_args(args: argparse.Namespace) -> int:
     try:
-        bus = Bus(bus_config_from_args(args, "world"))
+        bus = Bus(bus_config_from_args(args, "world"), wait_limit=args.timeout)
     except BusError as e:
         print(f"sme watch: {e}", file=sys.stderr)
         return 2
