@@ -1,13 +1,16 @@
-"""Sensorimotor embedding maths: pure numpy/scipy functions."""
+"""Sensorimotor embedding maths: pure functions (numpy/scipy; numba and rapidfuzz accelerate)."""
 
-from agent.embedding.classical_mds import MDSResult, classical_mds, double_centre
+from agent.embedding.classical_mds import MDSModel, MDSResult, classical_mds, double_centre
+from agent.embedding.landmark_mds import LandmarkResult, landmark_mds, landmark_trace_embedding, maxmin_landmarks
 from agent.embedding.procrustes import ProcrustesResult, procrustes, procrustes_error
 from agent.embedding.trace_distances import (
-    continuous_trace_distances, edit_trace_distances, pad_traces, trace_distances,
+    PreparedTraces, continuous_trace_distances, edit_trace_distances, pad_traces, trace_cross_distances, trace_distances,
+    update_trace_distances,
 )
 
 __all__ = [
-    "MDSResult", "classical_mds", "double_centre", "ProcrustesResult", "procrustes",
-    "procrustes_error", "continuous_trace_distances", "edit_trace_distances", "pad_traces",
-    "trace_distances",
+    "MDSModel", "MDSResult", "classical_mds", "double_centre", "LandmarkResult", "landmark_mds",
+    "landmark_trace_embedding", "maxmin_landmarks", "ProcrustesResult", "procrustes", "procrustes_error",
+    "PreparedTraces", "continuous_trace_distances", "edit_trace_distances", "pad_traces", "trace_cross_distances", "trace_distances",
+    "update_trace_distances",
 ]

@@ -1,10 +1,15 @@
 """Distances between action traces (ch. 3, Eq 3.1 and Algorithm 1).
 
 Continuous actions: pad the shorter trace with zero actions (appended by default, prepended as in
-Fig 5.5a) and sum the per-step Euclidean distances. Discrete actions: edit distance between the
-action-index sequences (unit insertion/deletion cost, `substitution_cost` for substitutions; 2
-gives the indel/LCS distance, which equals the Manhattan distance between grid cells when traces
-move in a consistent order).
+Fig 5.5a) and sum the per-step Euclidean distances - a metric on traces. Discrete actions: edit
+distance between the action-index sequences (unit insertion/deletion cost, `substitution_cost`
+for substitutions; 2 gives the indel/LCS distance, which equals the Manhattan distance between grid
+cells when traces move in a consistent order). Dynamic time warping (`kind="dtw"`) is offered as
+an option; it is *not* a metric (no triangle inequality), so MDS of it may show large negative
+eigenvalues.
+
+Continuous kernels are compiled (numba, parallel); edit distances use rapidfuzz (compiled, all
+cores). `dtype=np.float32` halves the n x n matrix.
 """
 
 from __future__ import annotations
@@ -12,68 +17,162 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from scipy.spatial.distance import cdist
+
+from agent.embedding import trace_kernels as K
 
 PADDINGS = ("append", "prepend")
+KINDS = ("continuous", "edit", "dtw")
 
 
-def pad_traces(traces: Sequence[np.ndarray], pad: str = "append") -> np.ndarray:
-    """Stack continuous traces (each [L_i, d]) into one [n, L_max, d] array padded with zeros."""
-    if pad not in PADDINGS:
-        raise ValueError(f"pad must be one of {PADDINGS}, not {pad!r}")
+def _as_2d(traces: Sequence) -> list[np.ndarray]:
     arrs = [np.asarray(t, dtype=np.float64) for t in traces]
+    arrs = [a.reshape(-1, 1) if a.ndim == 1 else a for a in arrs]
     if not arrs:
         raise ValueError("no traces")
-    arrs = [a.reshape(-1, 1) if a.ndim == 1 else a for a in arrs]
     d = arrs[0].shape[1]
     if any(a.ndim != 2 or a.shape[1] != d for a in arrs):
         raise ValueError("every continuous trace must be an array [length, action_dims] with the same action_dims")
     if any(not np.isfinite(a).all() for a in arrs):
         raise ValueError("traces contain NaN or inf")
-    L = max(a.shape[0] for a in arrs)
-    out = np.zeros((len(arrs), max(L, 1), d))
+    return arrs
+
+
+def pad_traces(traces: Sequence[np.ndarray], pad: str = "append", length: int | None = None) -> np.ndarray:
+    """Stack continuous traces (each [L_i, d]) into one [n, L, d] array padded with zero actions;
+    L = `length` or the longest trace. Any common L gives the same padded-sum distances."""
+    if pad not in PADDINGS:
+        raise ValueError(f"pad must be one of {PADDINGS}, not {pad!r}")
+    arrs = _as_2d(traces)
+    L = max(max(a.shape[0] for a in arrs), length or 0, 1)
+    out = np.zeros((len(arrs), L, arrs[0].shape[1]))
     for i, a in enumerate(arrs):
-        if pad == "append":
-            out[i, : a.shape[0]] = a
-        else:
-            out[i, L - a.shape[0]:] = a
+        if a.shape[0]:
+            if pad == "append":
+                out[i, : a.shape[0]] = a
+            else:
+                out[i, L - a.shape[0]:] = a
     return out
 
 
-def continuous_trace_distances(traces: Sequence[np.ndarray], pad: str = "append") -> np.ndarray:
-    """D[i, j] = sum_t || a_i(t) - a_j(t) || over zero-padded traces (Eq 3.1)."""
-    X = pad_traces(traces, pad)
-    n, L, _ = X.shape
-    D = np.zeros((n, n))
-    for t in range(L):
-        step = X[:, t, :]
-        if not step.any():
-            continue
-        D += cdist(step, step)
-    np.fill_diagonal(D, 0.0)
-    return D
+def _check_kind(kind: str) -> None:
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, not {kind!r}")
 
 
-def edit_trace_distances(traces: Sequence[Sequence[int]], substitution_cost: int = 1) -> np.ndarray:
-    """Pairwise edit distance between discrete action sequences (compiled, all cores)."""
+def _edit(a: Sequence, b: Sequence, substitution_cost: int, dtype: np.dtype) -> np.ndarray:
     from rapidfuzz.distance import Levenshtein
     from rapidfuzz.process import cdist as rf_cdist
 
     if substitution_cost < 1:
         raise ValueError("substitution_cost must be >= 1")
-    seqs = [[int(a) for a in t] for t in traces]
-    if not seqs:
+    sa = [[int(x) for x in t] for t in a]
+    sb = sa if b is a else [[int(x) for x in t] for t in b]
+    if not sa or not sb:
         raise ValueError("no traces")
-    D = rf_cdist(seqs, seqs, scorer=Levenshtein.distance, dtype=np.int32, workers=-1,
+    D = rf_cdist(sa, sb, scorer=Levenshtein.distance, dtype=np.int32, workers=-1,
                  scorer_kwargs={"weights": (1, 1, int(substitution_cost))})
-    return D.astype(np.float64)
+    return D.astype(dtype)
 
 
-def trace_distances(traces: Sequence, kind: str = "continuous", pad: str = "append",
-                    substitution_cost: int = 1) -> np.ndarray:
-    """Pairwise trace distances: kind "continuous" (padded sum) or "edit" (discrete actions)."""
-    if kind == "continuous":
-        return continuous_trace_distances(traces, pad)
+def trace_distances(traces: Sequence, kind: str = "continuous", pad: str = "append", substitution_cost: int = 1,
+                    dtype: type = np.float64) -> np.ndarray:
+    """The n x n matrix of pairwise trace distances (zero diagonal, symmetric)."""
+    _check_kind(kind)
     if kind == "edit":
-        return edit_trace_distances(traces, substitution_cost)
-    raise ValueError(f"kind must be 'continuous' or 'edit', not {kind!r}")
+        return _edit(traces, traces, substitution_cost, np.dtype(dtype))
+    if kind == "dtw":
+        arrs = _as_2d(traces)
+        X, lens = pad_traces(arrs), np.array([a.shape[0] for a in arrs])
+        out = np.zeros((len(arrs), len(arrs)), dtype=dtype)
+        K.dtw_cross(X, lens, X, lens, out, symmetric=True)
+        return out
+    X = pad_traces(traces, pad)
+    out = np.empty((X.shape[0], X.shape[0]), dtype=dtype)
+    K.padded_sum_pairs(X, out)
+    return out
+
+
+def trace_cross_distances(a: Sequence, b: Sequence, kind: str = "continuous", pad: str = "append",
+                          substitution_cost: int = 1, dtype: type = np.float64) -> np.ndarray:
+    """Distances from each trace in `a` to each trace in `b`: [len(a), len(b)]."""
+    _check_kind(kind)
+    if kind == "edit":
+        return _edit(a, b, substitution_cost, np.dtype(dtype))
+    A, B = _as_2d(a), _as_2d(b)
+    if kind == "dtw":
+        L = max(max(x.shape[0] for x in A + B), 1)
+        out = np.zeros((len(A), len(B)), dtype=dtype)
+        K.dtw_cross(pad_traces(A, length=L), np.array([x.shape[0] for x in A]), pad_traces(B, length=L),
+                    np.array([x.shape[0] for x in B]), out)
+        return out
+    L = max(max(x.shape[0] for x in A + B), 1)
+    out = np.empty((len(A), len(B)), dtype=dtype)
+    K.padded_sum_cross(pad_traces(A, pad, L), pad_traces(B, pad, L), out)
+    return out
+
+
+def update_trace_distances(D: np.ndarray, traces: Sequence, changed: Sequence[int], kind: str = "continuous",
+                           pad: str = "append", substitution_cost: int = 1) -> np.ndarray:
+    """Recompute, in place, only the rows and columns of `D` whose traces changed; returns `D`.
+    Costs O(len(changed) * n) trace comparisons instead of O(n^2)."""
+    idx = np.unique(np.asarray(changed, dtype=np.int64))
+    if idx.size == 0:
+        return D
+    if D.shape != (len(traces), len(traces)):
+        raise ValueError(f"D is {D.shape}, traces are {len(traces)}")
+    rows = trace_cross_distances([traces[i] for i in idx], traces, kind, pad, substitution_cost, D.dtype)
+    D[idx, :] = rows
+    D[:, idx] = rows.T
+    D[idx, idx] = 0
+    return D
+
+
+def continuous_trace_distances(traces: Sequence[np.ndarray], pad: str = "append") -> np.ndarray:
+    return trace_distances(traces, "continuous", pad)
+
+
+def edit_trace_distances(traces: Sequence[Sequence[int]], substitution_cost: int = 1) -> np.ndarray:
+    return trace_distances(traces, "edit", substitution_cost=substitution_cost)
+
+
+class PreparedTraces:
+    """Traces converted once to the form the kernels take (padded array, lengths, or integer
+    sequences), for repeated distance queries against members (landmark selection, streaming)."""
+
+    def __init__(self, traces: Sequence, kind: str = "continuous", pad: str = "append",
+                 substitution_cost: int = 1) -> None:
+        _check_kind(kind)
+        self.kind, self.pad, self.substitution_cost = kind, pad, substitution_cost
+        self.n = len(traces)
+        if kind == "edit":
+            self._seqs = [[int(x) for x in t] for t in traces]
+        else:
+            arrs = _as_2d(traces)
+            self._X = pad_traces(arrs, pad)
+            self._lens = np.array([a.shape[0] for a in arrs])
+
+    def subset(self, rows: np.ndarray) -> "PreparedTraces":
+        """The traces at `rows`, prepared (copied once)."""
+        sub = object.__new__(PreparedTraces)
+        sub.kind, sub.pad, sub.substitution_cost, sub.n = self.kind, self.pad, self.substitution_cost, len(rows)
+        if self.kind == "edit":
+            sub._seqs = [self._seqs[i] for i in rows]
+        else:
+            sub._X, sub._lens = np.ascontiguousarray(self._X[rows]), self._lens[rows]
+        return sub
+
+    def distances_to(self, idx: np.ndarray, rows: np.ndarray | None = None, dtype: type = np.float64) -> np.ndarray:
+        """[len(rows) or n, len(idx)]: the traces at `rows` (default all) against those at `idx`."""
+        idx = np.asarray(idx, dtype=np.int64)
+        if self.kind == "edit":
+            left = self._seqs if rows is None else [self._seqs[i] for i in rows]
+            return _edit(left, [self._seqs[i] for i in idx], self.substitution_cost, np.dtype(dtype))
+        A = self._X if rows is None else self._X[rows]
+        la = self._lens if rows is None else self._lens[rows]
+        out = np.empty((A.shape[0], idx.size), dtype=dtype)
+        if self.kind == "dtw":
+            out[:] = 0
+            K.dtw_cross(A, la, self._X[idx], self._lens[idx], out)
+        else:
+            K.padded_sum_cross(A, np.ascontiguousarray(self._X[idx]), out)
+        return out

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.embedding import classical_mds, trace_distances
+from agent.embedding import classical_mds, trace_distances, update_trace_distances
 from agent.learners.lspi import LSPI, TabularBasis
 from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from protocol.errors import SpecMismatch
@@ -49,6 +49,8 @@ class GridworldProgram(Program):
         self._trace: list[int] = []
         self._seen: set[tuple[int, int]] = set()
         self._reached = 0
+        self._last_traces: list[list[int]] = []
+        self._D: np.ndarray | None = None
 
     # helpers -----------------------------------------------------------------------------------
     def _state(self, obs: Observation) -> int:
@@ -64,7 +66,14 @@ class GridworldProgram(Program):
         return self.lspi.greedy(s, prefer)
 
     def _finish_embedding(self, step: int) -> None:
-        D = trace_distances(self._traces, kind="edit", substitution_cost=self.substitution_cost)
+        # only the rows of start states whose trace changed since the last embedding are recomputed
+        prev, D = self._last_traces, self._D
+        if D is None or len(prev) != len(self._traces):
+            D = trace_distances(self._traces, kind="edit", substitution_cost=self.substitution_cost)
+        else:
+            changed = [i for i, (a, b) in enumerate(zip(prev, self._traces)) if a != b]
+            D = update_trace_distances(D, self._traces, changed, kind="edit", substitution_cost=self.substitution_cost)
+        self._last_traces, self._D = [list(t) for t in self._traces], D
         mds = classical_mds(D, self.dims)
         self.version += 1
         reached = self._reached

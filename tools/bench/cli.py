@@ -6,11 +6,12 @@ import argparse
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="benchmarks (loop, record, detectors, world)", description="Run a benchmark; see its --help.")
+    p = sub.add_parser("bench", help="benchmarks (loop, embedding, record, detectors, world)", description="Run a benchmark; see its --help.")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
-    from tools.bench import detectors, loop, record, world
+    from tools.bench import detectors, embedding, loop, record, world
 
     loop.add_parser(bsub)
+    embedding.add_parser(bsub)
     record.add_parser(bsub)
     detectors.add_parser(bsub)
     world.add_parser(bsub)
