@@ -23,6 +23,18 @@ def _retina(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
     return RetinaWorld.from_params(world_id, seed, params)
 
 
+def _vergence(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
+    from worlds.vergence import VergenceWorld
+
+    return VergenceWorld.from_params(world_id, seed, params)
+
+
+def _stereo(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
+    from worlds.stereo_pair import StereoPairWorld
+
+    return StereoPairWorld.from_params(world_id, seed, params)
+
+
 def _bench(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
     from worlds.bench import BenchWorld
 
@@ -33,6 +45,8 @@ WORLDS: dict[str, Callable[[str, int, Mapping[str, Any]], World]] = {
     "gridworld": _gridworld,
     "gridworld-barrier": _gridworld_barrier,
     "retina": _retina,
+    "vergence": _vergence,
+    "stereo": _stereo,
     "bench": _bench,
 }
 

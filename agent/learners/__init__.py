@@ -1,5 +1,6 @@
 """Learners: one algorithm per file."""
 
-from agent.learners.lspi import LSPI, TabularBasis
+from agent.learners.lspi import LSPI, RBFBasis, TabularBasis
+from agent.learners.saccade import SaccadeLearner
 
-__all__ = ["LSPI", "TabularBasis"]
+__all__ = ["LSPI", "RBFBasis", "SaccadeLearner", "TabularBasis"]

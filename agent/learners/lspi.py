@@ -34,6 +34,30 @@ class TabularBasis:
         return sp.csr_matrix((np.ones(n), (np.arange(n), cols)), shape=(n, self.k))
 
 
+@dataclass(frozen=True)
+class RBFBasis:
+    """Gaussian radial basis functions of a scalar state (plus a constant), one block per action."""
+
+    centres: tuple[float, ...]
+    width: float
+    n_actions: int
+
+    @property
+    def k(self) -> int:
+        return (len(self.centres) + 1) * self.n_actions
+
+    def phi(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        x = np.asarray(states, dtype=np.float64).reshape(-1, 1)
+        a = np.asarray(actions, dtype=np.int64).reshape(-1)
+        f = np.hstack([np.ones((x.shape[0], 1)), np.exp(-0.5 * ((x - np.asarray(self.centres)) / self.width) ** 2)])
+        out = np.zeros((x.shape[0], self.k))
+        m = f.shape[1]
+        for j in range(self.n_actions):
+            rows = a == j
+            out[rows, j * m:(j + 1) * m] = f[rows]
+        return out
+
+
 class LSPI:
     def __init__(self, basis: TabularBasis, gamma: float = 0.9, ridge: float = 1e-3,
                  capacity: int = 50_000, tie_tolerance: float = 0.05) -> None:
@@ -64,10 +88,10 @@ class LSPI:
         return len(self._s)
 
     def learn_one(self, s: int, a: int, r: float, s_next: int, done: bool) -> None:
-        self._s.append(int(s))
+        self._s.append(s)
         self._a.append(int(a))
         self._r.append(float(r))
-        self._s2.append(int(s_next))
+        self._s2.append(s_next)
         self._done.append(bool(done))
         if len(self._s) > self.capacity:
             for buf in (self._s, self._a, self._r, self._s2, self._done):
@@ -107,8 +131,9 @@ class LSPI:
         S2, done = np.array(self._s2), np.array(self._done)
         A2 = self._greedy_many(S2)
         Phi = self.basis.phi(S, A)
-        Phi2 = self.basis.phi(S2, A2).multiply((~done)[:, None]).tocsr()
-        Amat = (Phi.T @ (Phi - self.gamma * Phi2))
+        Phi2 = self.basis.phi(S2, A2)
+        Phi2 = Phi2.multiply((~done)[:, None]).tocsr() if sp.issparse(Phi2) else Phi2 * (~done)[:, None]
+        Amat = Phi.T @ (Phi - self.gamma * Phi2)
         Amat = Amat.toarray() if sp.issparse(Amat) else np.asarray(Amat)
         b = np.asarray(Phi.T @ R).reshape(-1)
         Amat[np.diag_indices_from(Amat)] += self.ridge

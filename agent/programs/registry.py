@@ -20,7 +20,14 @@ def _retina(spec: WorldSpec, seed: int, **kw: Any) -> Program:
     return RetinaProgram(spec, seed, **kw)
 
 
+def _vergence(spec: WorldSpec, seed: int, **kw: Any) -> Program:
+    from agent.programs.vergence import VergenceProgram
+
+    return VergenceProgram(spec, seed, **kw)
+
+
 PROGRAMS: dict[str, Callable[..., Program]] = {
+    "vergence": _vergence,
     "gridworld": _gridworld,
     "retina": _retina,
     "echo": lambda spec, seed, **kw: EchoProgram(spec, seed),

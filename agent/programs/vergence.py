@@ -1,0 +1,100 @@
+"""The vergence program (ch. 7): LSPI learns to verge on what the fovea sees; the lengths of the
+resulting vergence traces are a 1-D map of depth.
+
+State feature: the foveated left/right difference d = mean |f_l - f_r| (Eq 7.2), which the agent
+computes from its two foveae (Gaussian RBFs of d, one block per action). Exploration is
+epsilon-greedy around the current policy. After every `samples_per_iteration` samples, one LSPI
+iteration, then the greedy policy runs from every start state; traces are action sequences, the
+trace distance is the indel edit distance (for pure converge traces: the difference of their
+lengths, Eq 7.3), classical MDS to 1-D.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.embedding import classical_mds, trace_distances
+from agent.learners.lspi import LSPI, RBFBasis
+from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from protocol.errors import SpecMismatch
+from protocol.messages import Observation, WorldSpec
+
+
+def foveal_difference(obs: Observation) -> float:
+    left = obs.tensors["left"].astype(np.float64, copy=False)
+    right = obs.tensors["right"].astype(np.float64, copy=False)
+    if left.shape != right.shape:
+        raise SpecMismatch(f"left {left.shape} and right {right.shape} foveae differ in shape")
+    return float(np.abs(left - right).mean())
+
+
+class VergenceProgram(Program):
+    name = "vergence"
+
+    def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 300, epsilon: float = 0.2,
+                 gamma: float = 0.95, ridge: float = 1e-3, max_trace: int = 60,
+                 centres: tuple[float, ...] = tuple(np.linspace(0.0, 0.2, 11)), width: float = 0.02) -> None:
+        super().__init__(spec, seed)
+        if not spec.action_space.discrete or spec.action_space.n != 2 or spec.n_starts < 2:
+            raise SpecMismatch("vergence program needs 2 discrete actions (converge, diverge) and >= 2 start states")
+        spec.sensor("left"), spec.sensor("right")
+        self.samples_per_iteration = samples_per_iteration
+        self.epsilon = epsilon
+        self.max_trace = max_trace
+        self.lspi = LSPI(RBFBasis(tuple(float(c) for c in centres), width, 2), gamma=gamma, ridge=ridge)
+        self.phase = "explore"
+        self.new_samples = 0
+        self._prev: tuple[float, int] | None = None
+        self._start = 0
+        self._traces: list[list[int]] = []
+        self._trace: list[int] = []
+        self._reached = 0
+
+    def act(self, obs: Observation) -> Decision:
+        d = foveal_difference(obs)
+        if self.phase == "explore":
+            if obs.t > 0 and self._prev is not None:
+                self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, obs.done)
+                self.new_samples += 1
+            self._prev = None
+            if self.new_samples >= self.samples_per_iteration:
+                self.new_samples = 0
+                change = self.lspi.iterate()
+                self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}", obs.step,
+                                      {"weight_change": change}))
+                self.phase, self._start, self._traces, self._trace, self._reached = "embed", 0, [], [], 0
+                return Decision(reset=True, start=0)
+            if obs.done:
+                return Decision(reset=True, start=-1)
+            a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
+            self._prev = (d, a)
+            return Decision((float(a),))
+        if obs.t == 0 and obs.start != self._start:
+            return Decision(reset=True, start=self._start)
+        if obs.done or len(self._trace) >= self.max_trace:
+            self._reached += int(obs.reward > 0)
+            self._traces.append(self._trace)
+            self._trace = []
+            self._start += 1
+            if self._start < self.spec.n_starts:
+                return Decision(reset=True, start=self._start)
+            self._embed(obs.step)
+            self.phase = "explore"
+            return Decision(reset=True, start=-1)
+        a = self.lspi.greedy(d)
+        self._trace.append(a)
+        return Decision((float(a),))
+
+    def _embed(self, step: int) -> None:
+        D = trace_distances(self._traces, kind="edit", substitution_cost=2)
+        mds = classical_mds(D, 1)
+        n = len(self._traces)
+        self.emit(EmbeddingOutput(
+            f"policy_iteration {self.lspi.iterations}", tuple(range(n)), mds.coordinates,
+            tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
+            {"lspi_iterations": float(self.lspi.iterations), "policy_success": self._reached / n,
+             "mean_trace_length": float(np.mean([len(t) for t in self._traces]))}))
+
+    def world_restarted(self) -> None:
+        self._prev = None
+        self._trace = []

@@ -1,0 +1,200 @@
+"""Depth from vergence (ch. 7): a robot on a track with two cameras facing a stop sign, rendered
+headless with PyBullet.
+
+The cameras sit a baseline B apart (default 0.5 m) and start each episode parallel. Actions turn
+both eyes inward (converge) or outward (diverge) by one step (0.01 rad each). Each camera sees
+through a fovea (`fovea` x `fovea` px over `fovea_deg` degrees), published as tensors "left" and
+"right". The perceptual goal is the vergence where the foveated left/right difference
+d(r, l) = mean |f_l - f_r| (Eq 7.2) is minimal over the eyes' range: reaching it gives reward 1
+and ends the episode. Start states are track positions (the sign is `sign_distance` m from the
+track origin); truth = the true vergence angle per eye, atan((B/2) / Z) (Eq 7.5), and Z.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Mapping
+
+import numpy as np
+import pybullet as p
+import pybullet_data
+from pybullet_utils.bullet_client import BulletClient
+
+from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
+from worlds.base import PerturbationError, StepResult, World, param
+
+CONVERGE, DIVERGE = 0, 1
+
+
+def foveal_difference(left: np.ndarray, right: np.ndarray) -> float:
+    """d(r, l) of Eq 7.2, as a mean over the fovea."""
+    return float(np.abs(np.asarray(left, np.float64) - np.asarray(right, np.float64)).mean())
+
+
+class VergenceWorld(World):
+    kind = "vergence"
+
+    def __init__(self, world_id: str = "vergence", seed: int = 0, baseline: float = 0.5, sign_distance: float = 3.0,
+                 n_starts: int = 20, nearest: float = 0.8, step_rad: float = 0.01, fovea: int = 16,
+                 fovea_deg: float = 12.0, max_steps: int = 40, vertical: bool = False) -> None:
+        super().__init__(world_id, seed)
+        if baseline <= 0 or not 0 < nearest < sign_distance or n_starts < 2:
+            raise ValueError("baseline > 0, 0 < nearest < sign_distance and n_starts >= 2 are required")
+        self.baseline, self.sign_distance, self.step_rad = baseline, sign_distance, step_rad
+        self.fovea, self.fovea_deg, self.vertical = fovea, fovea_deg, vertical
+        self.max_episode_steps = max_steps
+        # start states: distances to the sign, evenly spaced from `nearest` to the sign's distance
+        self.distances = np.linspace(nearest, sign_distance, n_starts)
+        self.z = float(self.distances[-1])
+        self.theta = 0.0
+        self.k = 0      # vergence in steps
+        self.goal = 0   # the step where d is minimal
+        self.t = 0
+        self._c = BulletClient(connection_mode=p.DIRECT)
+        self._build()
+        self._proj = self._c.computeProjectionMatrixFOV(fovea_deg, 1.0, 0.05, 20.0)
+        self._goal_cache: dict[int, int] = {}
+
+    @classmethod
+    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "VergenceWorld":
+        return cls(world_id, seed, baseline=param(params, "baseline", 0.5, float),
+                   sign_distance=param(params, "sign_distance", 3.0, float), n_starts=param(params, "n_starts", 20, int),
+                   nearest=param(params, "nearest", 0.8, float), fovea=param(params, "fovea", 16, int),
+                   fovea_deg=param(params, "fovea_deg", 12.0, float), vertical=param(params, "vertical", False, bool))
+
+    def _build(self) -> None:
+        c = self._c
+        # a red octagon (the stop sign) 0.75 m across on a pole, textured so the fovea sees structure
+        r = 0.375
+        ang = np.pi / 8 + np.arange(8) * np.pi / 4
+        ring = np.c_[np.zeros(8), r * np.cos(ang), r * np.sin(ang)]
+        verts = np.vstack([[0.0, 0.0, 0.0], ring]).tolist()
+        idx = []
+        for i in range(8):
+            idx += [0, 1 + i, 1 + (i + 1) % 8]
+        uvs = [[0.5, 0.5]] + [[0.5 + 0.5 * math.cos(a), 0.5 + 0.5 * math.sin(a)] for a in ang]
+        vis = c.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx + idx[::-1], uvs=uvs,
+                                  rgbaColor=[1.0, 0.25, 0.2, 1.0])
+        self._sign = c.createMultiBody(0, baseVisualShapeIndex=vis, basePosition=[self.sign_distance, 0, 1.2])
+        tex = c.loadTexture(os.path.join(pybullet_data.getDataPath(), "tex256.png"))
+        c.changeVisualShape(self._sign, -1, textureUniqueId=tex)
+        pole = c.createVisualShape(p.GEOM_BOX, halfExtents=[0.02, 0.02, 0.6], rgbaColor=[0.6, 0.6, 0.6, 1])
+        c.createMultiBody(0, baseVisualShapeIndex=pole, basePosition=[self.sign_distance + 0.03, 0, 0.6])
+        # a textured backdrop: eyes that cross past the sign see different things, not a blank wall
+        back = c.createVisualShape(p.GEOM_BOX, halfExtents=[0.01, 6, 6], rgbaColor=[0.7, 0.8, 0.7, 1])
+        wall = c.createMultiBody(0, baseVisualShapeIndex=back, basePosition=[self.sign_distance + 4.0, 0, 1.2])
+        c.changeVisualShape(wall, -1, textureUniqueId=c.loadTexture(os.path.join(pybullet_data.getDataPath(),
+                                                                                  "checker_grid.jpg")))
+
+    # geometry ----------------------------------------------------------------------------------
+    def _eyes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(position, gaze direction) of left and right camera at the current vergence."""
+        x = self.sign_distance - self.z
+        h = self.baseline / 2
+        out = []
+        for side in (1.0, -1.0):  # left eye at +y (or up when vertical), turning toward the middle
+            off = np.array([0.0, 0.0, side * h]) if self.vertical else np.array([0.0, side * h, 0.0])
+            pos = np.array([x, 0.0, 1.2]) + off
+            d = np.array([math.cos(self.theta), 0.0, 0.0])
+            lateral = -side * math.sin(self.theta)
+            if self.vertical:
+                d[2] = lateral
+            else:
+                d[1] = lateral
+            out.append((pos, d))
+        return out
+
+    def true_angle(self, z: float | np.ndarray) -> np.ndarray:
+        """Per-eye vergence angle that fixates the sign centre from distance z (Eq 7.5)."""
+        return np.arctan2(self.baseline / 2, np.asarray(z, dtype=np.float64))
+
+    def render(self) -> tuple[np.ndarray, np.ndarray]:
+        imgs = []
+        up = [0.0, 1.0, 0.0] if self.vertical else [0.0, 0.0, 1.0]
+        for pos, d in self._eyes():
+            view = self._c.computeViewMatrix(pos.tolist(), (pos + d).tolist(), up)
+            _, _, rgb, _, _ = self._c.getCameraImage(self.fovea, self.fovea, view, self._proj, shadow=0,
+                                                     renderer=p.ER_TINY_RENDERER, flags=p.ER_NO_SEGMENTATION_MASK)
+            imgs.append((np.asarray(rgb, dtype=np.float32).reshape(self.fovea, self.fovea, 4)[..., :3].mean(axis=2)
+                         / 255.0).astype(np.float32))
+        return imgs[0], imgs[1]
+
+    def differences(self) -> np.ndarray:
+        """d(r, l) at every vergence step 0..max_episode_steps from the current position."""
+        saved = self.theta
+        out = []
+        try:
+            for k in range(self.max_episode_steps + 1):
+                self.theta = k * self.step_rad
+                out.append(foveal_difference(*self.render()))
+        finally:
+            self.theta = saved
+        return np.array(out)
+
+    # World interface ---------------------------------------------------------------------------
+    def spec(self) -> WorldSpec:
+        f = (self.fovea, self.fovea)
+        return WorldSpec(
+            world_id=self.world_id, kind=self.kind,
+            sensors=(SensorSpec("left", "float32", f, 0, 1, "left fovea"), SensorSpec("right", "float32", f, 0, 1, "right fovea")),
+            action_space=ActionSpace(n=2, names=("converge", "diverge")), reward_min=0.0, reward_max=1.0,
+            program="vergence", n_starts=len(self.distances),
+            params={"baseline": str(self.baseline), "vertical": str(self.vertical).lower(), "step_rad": str(self.step_rad)},
+        )
+
+    def _obs(self, reward: float, done: bool) -> StepResult:
+        left, right = self.render()
+        return StepResult({"left": left, "right": right}, reward, done)
+
+    def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        if start is None or start < 0:
+            start = int(self.rng.integers(len(self.distances)))
+        if start >= len(self.distances):
+            raise ValueError(f"start {start} out of range 0..{len(self.distances) - 1}")
+        if self.z != float(self.distances[start]) or not self._goals_known(start):
+            self.z = float(self.distances[start])
+            self._goal_cache[start] = int(np.argmin(self.differences()))
+        self.goal = self._goal_cache[start]
+        self.theta, self.k, self.t = 0.0, 0, 0
+        return self._obs(0.0, False)
+
+    def _goals_known(self, start: int) -> bool:
+        return start in self._goal_cache
+
+    def step(self, action: np.ndarray) -> StepResult:
+        a = int(np.asarray(action).reshape(-1)[0])
+        if a not in (CONVERGE, DIVERGE):
+            raise ValueError(f"action must be 0 (converge) or 1 (diverge), got {a}")
+        self.t += 1
+        self.k = min(self.k + 1, self.max_episode_steps) if a == CONVERGE else max(self.k - 1, 0)
+        self.theta = self.k * self.step_rad
+        if self.k == self.goal:
+            return self._obs(1.0, True)
+        return self._obs(0.0, self.t >= self.max_episode_steps)
+
+    def perturb(self, control: Control) -> str:
+        if control.kind == "morph":
+            self.baseline = param(control.params, "baseline", self.baseline, float)
+            self.vertical = param(control.params, "vertical", self.vertical, bool)
+            self._goal_cache.clear()
+            return f"morph: baseline {self.baseline} m, cameras {'vertical' if self.vertical else 'horizontal'}"
+        if control.kind == "heal":
+            self.baseline, self.vertical = 0.5, False
+            self._goal_cache.clear()
+            return "heal: baseline 0.5 m, horizontal cameras"
+        raise PerturbationError(f"vergence has no perturbation {control.kind!r}; use morph or heal")
+
+    def truth(self) -> Truth:
+        return Truth(self.world_id, "start_states",
+                     {"positions": self.true_angle(self.distances)[:, None], "distance": self.distances[:, None].copy()})
+
+    def close(self) -> None:
+        if self._c is not None:
+            try:
+                self._c.disconnect()
+            except p.error:
+                pass
+            self._c = None
