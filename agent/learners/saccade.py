@@ -11,6 +11,10 @@ gamma pi* + (1 - gamma) a_random, plus Gaussian noise of sd `noise_sd`. (The dis
 by the maximum reward seen; with the robust rule R_k are averages, so that ratio never reaches 1
 and random saccades would be mixed in for ever. Against the moving average, gamma is ~1 once the
 estimates are learned and 0 right after `reset_estimates()`, which a detected drop triggers.)
+Exploration modes: "gaussian" (4.4.1: noise only), "gamma" (mixing always), and "relearn" (the
+default: noise only, and gamma mixing from `reset_estimates()` until `end_relearning()`). Mixing
+all the time costs accuracy - a lucky random saccade pulls every active field's preference a long
+way - so it is kept for what 4.4.2 introduced it for: large changes.
 The learned geometry is -pi_k: the position of field k in motor units.
 """
 
@@ -19,12 +23,12 @@ from __future__ import annotations
 import numpy as np
 
 RULES = ("basic", "robust")
-EXPLORATION = ("gamma", "gaussian")
+EXPLORATION = ("relearn", "gamma", "gaussian")
 
 
 class SaccadeLearner:
     def __init__(self, n_fields: int, low: np.ndarray, high: np.ndarray, alpha: float = 0.5,
-                 noise_sd: float | None = None, rule: str = "robust", exploration: str = "gamma",
+                 noise_sd: float | None = None, rule: str = "robust", exploration: str = "relearn",
                  init_spread: float = 1.0, seed: int = 0) -> None:
         low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         if n_fields < 1:
@@ -60,11 +64,16 @@ class SaccadeLearner:
         self.r_ref = 0.0
         self.updates = 0
         self.resets = 0
+        self.relearning = False
 
     def reset_estimates(self) -> None:
         """After a large drop (lesion, reversal): forget the reward estimates so exploration rises."""
         self.R[:] = 0.0
         self.resets += 1
+        self.relearning = True
+
+    def end_relearning(self) -> None:
+        self.relearning = False
 
     @property
     def positions(self) -> np.ndarray:
@@ -86,7 +95,7 @@ class SaccadeLearner:
 
     def act(self, delta: np.ndarray) -> np.ndarray:
         a = self.greedy(delta)
-        if self.exploration == "gamma":
+        if self.exploration == "gamma" or (self.exploration == "relearn" and self.relearning):
             gamma = 0.0 if self.r_ref <= 0 else float(np.clip(self.expected_reward(delta) / self.r_ref, 0.0, 1.0))
             a = gamma * a + (1 - gamma) * self.rng.uniform(self.low, self.high)
         a = a + self.rng.normal(0.0, self.noise_sd, a.shape)

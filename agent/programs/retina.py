@@ -24,7 +24,7 @@ from protocol.messages import Observation, WorldSpec
 class RetinaProgram(Program):
     name = "retina"
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, rule: str = "robust", exploration: str = "gamma",
+    def __init__(self, spec: WorldSpec, seed: int = 0, rule: str = "robust", exploration: str = "relearn",
                  alpha: float = 0.5, noise_sd: float | None = None, embed_every: int = 1000,
                  settle_min: int = 1000, settle_window: int = 300, settle_gain: float = 0.03,
                  min_experience: float = 1.0) -> None:
@@ -99,6 +99,7 @@ class RetinaProgram(Program):
                                       f"after the drop at step {self._drop[0]}", obs.step,
                                       {"episodes": float(self.episodes - self._drop[1])}))
                 self.emit(self.embedding(f"relearned after drop at step {self._drop[0]}", obs.step))
+                self.learner.end_relearning()
                 self._drop = None
         self._pre = None
         return Decision(reset=True)

@@ -92,7 +92,7 @@ def _evaluator(world: RetinaWorld, program: RetinaProgram, curve: Curve, every: 
 
 
 def learning(seed: int, steps: int = 5000, every: int = 500, rule: str = "robust", supersample: int = 2,
-             n_eval: int = 30, exploration: str = "gamma") -> Curve:
+             n_eval: int = 30, exploration: str = "relearn") -> Curve:
     """Greedy evaluation every `every` training saccades; `steps` counts training saccades
     (episodes), as in the dissertation."""
     world, program = make(seed, rule, supersample, embed_every=10**9, exploration=exploration)
@@ -123,7 +123,7 @@ class PerturbationRun:
 
 def perturbation(seed: int, kind: str, at: int, steps: int, rule: str = "robust", detector: str | None = "cusum",
                  supersample: int = 2, params: dict | None = None, embed_every: int = 1000,
-                 exploration: str = "gamma", every: int | None = None, n_eval: int = 30) -> PerturbationRun:
+                 exploration: str = "relearn", every: int | None = None, n_eval: int = 30) -> PerturbationRun:
     """Train for `steps` saccades, perturb right after saccade `at`. With `every`, greedy
     evaluations (Curve) are made every `every` saccades."""
     world, program = make(seed, rule, supersample, embed_every=embed_every, exploration=exploration)
