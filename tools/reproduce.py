@@ -1,8 +1,9 @@
 """`sme reproduce CHAPTER`: rerun a dissertation experiment, seeded, and write its table and plots.
 
-Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and barrier, random policy)
-and `retina` (ch. 4: saccade learning curves, lesion with the basic vs robust rule, reversal
-detected by the agent itself). Runs go to worker processes (spawned); results are written to
+Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and barrier, random policy),
+`retina` (ch. 4: saccade learning curves, lesion with the basic vs robust rule, reversal detected
+by the agent itself) and `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
+1-D depth map, on the PyBullet robot and on the Middlebury stereo pair). Runs go to worker processes (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
 
@@ -69,6 +70,30 @@ def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
             "false_alarms": sum(d < at for d in r.drop_episodes),
             "relearn_episodes": R.relearn_episodes(r.rewards, at), "embeddings": embs,
             "reward_ma": R.moving_average(r.rewards, 200)[::50].tolist()}
+
+
+def job_vergence(seed: int, world: str, iterations: int) -> dict:
+    import numpy as np
+
+    from agent.programs.vergence import VergenceProgram
+    from tools.inprocess import run_inprocess
+    from worlds.registry import make_world
+
+    w = make_world(world, None, seed, {})
+    goals = []
+    for st in range(w.spec().n_starts):
+        w.reset(start=st)
+        goals.append(int(w.goal))
+    truth = np.asarray(w.truth().tensors["positions"][:, 0], dtype=np.float64)
+    p = VergenceProgram(w.spec(), seed=seed)
+    run = run_inprocess(w, p, 40000, stop_when=lambda r: len(r.embeddings) >= iterations)
+    w.close()
+    embs = run.embeddings
+    first_perfect = next((i + 1 for i, e in enumerate(embs) if e.metrics["policy_success"] == 1.0), None)
+    return {"seed": seed, "world": world, "errors": [e.procrustes_error for e in embs],
+            "success": [e.metrics["policy_success"] for e in embs], "first_perfect_iteration": first_perfect,
+            "goal_minus_truth": (np.array(goals) - truth).tolist() if world == "stereo" else
+            (np.array(goals) - truth / 0.01).tolist()}
 
 
 def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
@@ -172,11 +197,29 @@ def _plot(out: str, name: str, title: str, xlabel: str, ylabel: str, series, log
     plt.close(fig)
 
 
-CHAPTERS = {"gridworld": gridworld, "retina": retina}
+def vergence(runs: int, quick: bool, workers: int, out: str) -> dict:
+    iters = 5 if quick else 12
+    res = _pool_map(job_vergence, [(s, w, iters) for w in ("vergence", "stereo") for s in range(runs)], workers)
+    lines = ["| world | first perfect LSPI iteration (per run) | Procrustes error of the last embedding | "
+             "matching minimum vs truth | dissertation |", "|---|---|---|---|---|"]
+    for w, ref in (("vergence", "perfect in 9 iterations; Procrustes 0.0257"),
+                   ("stereo", "within 2 px; Procrustes 0.0003")):
+        rs = [r for r in res if r["world"] == w]
+        diff = np.abs(np.array(rs[0]["goal_minus_truth"]))
+        unit = "px" if w == "stereo" else "steps of 0.01 rad"
+        match = f"{(diff <= 2).mean() * 100:.0f} % within 2 {unit}, max {diff.max():.1f}"
+        lines.append(f"| {w} | {[r['first_perfect_iteration'] for r in rs]} | {_fmt(_mean_se([r['errors'][-1] for r in rs]), 4)} "
+                     f"| {match} | {ref} |")
+    _plot(out, "vergence_lspi.png", "Procrustes error per LSPI iteration (ch. 7)", "LSPI iteration", "Procrustes error",
+          [(f"{r['world']} seed {r['seed']}", list(range(1, len(r["errors"]) + 1)), r["errors"]) for r in res], logy=True)
+    return {"results": res, "markdown": "\n".join(lines)}
+
+
+CHAPTERS = {"gridworld": gridworld, "retina": retina, "vergence": vergence}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("reproduce", help="rerun a dissertation experiment (gridworld, retina)",
+    p = sub.add_parser("reproduce", help="rerun a dissertation experiment (gridworld, retina, vergence)",
                        description=__doc__)
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")
     p.add_argument("--runs", type=int, default=10, help="seeded runs per condition (default 10)")
