@@ -43,29 +43,30 @@ def main_args(args: argparse.Namespace) -> int:
     seen = [0]
     lock = threading.Lock()
 
-    def on_embedding(msg):
-        try:
-            e = codec.decode(Embedding, msg.payload)
-        except ProtocolError as err:
-            print(f"sme watch: skipped a bad embedding message on {msg.key}: {err}", file=sys.stderr)
-            return
-        with lock:
-            if done.is_set():
+    def receiver(cls, show, counts: bool):
+        def on(msg):
+            try:
+                m = codec.decode(cls, msg.payload)
+            except ProtocolError as err:
+                print(f"sme watch: skipped a bad {cls.__name__} message on {msg.key}: {err}", file=sys.stderr)
                 return
-            print_json(embedding_dict(e, args.coords)) if args.json else print(format_embedding(e), flush=True)
-            seen[0] += 1
-            if args.count is not None and seen[0] >= args.count:
-                done.set()
+            with lock:
+                if done.is_set():
+                    return
+                show(m)
+                if counts:
+                    seen[0] += 1
+                    if args.count is not None and seen[0] >= args.count:
+                        done.set()
 
-    def on_event(msg):
-        try:
-            e = codec.decode(AgentEvent, msg.payload)
-        except ProtocolError as err:
-            print(f"sme watch: skipped a bad event message on {msg.key}: {err}", file=sys.stderr)
-            return
-        with lock:
-            if not done.is_set():
-                print_json(event_dict(e)) if args.json else print(format_event(e), flush=True)
+        return on
+
+    if args.json:
+        on_embedding = receiver(Embedding, lambda e: print_json(embedding_dict(e, args.coords)), True)
+        on_event = receiver(AgentEvent, lambda e: print_json(event_dict(e)), False)
+    else:
+        on_embedding = receiver(Embedding, lambda e: print(format_embedding(e), flush=True), True)
+        on_event = receiver(AgentEvent, lambda e: print(format_event(e), flush=True), False)
 
     signal.signal(signal.SIGINT, lambda *a: done.set())
     signal.signal(signal.SIGTERM, lambda *a: done.set())

@@ -44,6 +44,17 @@ class World(abc.ABC):
     @abc.abstractmethod
     def step(self, action: np.ndarray) -> StepResult: ...
 
+    def pick_start(self, seed: int | None, start: int | None, n_starts: int) -> int:
+        """For `reset`: reseed if asked, draw a random start state when `start` is None or negative,
+        refuse one out of range."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        if start is None or start < 0:
+            return int(self.rng.integers(n_starts))
+        if start >= n_starts:
+            raise ValueError(f"start {start} out of range 0..{n_starts - 1}")
+        return int(start)
+
     def perturb(self, control: Control) -> str:
         """Apply a perturbation; return a one-line description of what changed."""
         raise PerturbationError(f"world kind {self.kind!r} has no perturbation {control.kind!r}")

@@ -83,12 +83,7 @@ class GridWorld(World):
         return StepResult({"state": np.array([sid], dtype=np.int32)}, reward, done)
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
-        if seed is not None:
-            self.rng = np.random.default_rng(seed)
-        if start is None or start < 0:
-            start = int(self.rng.integers(len(self.cells)))
-        if start >= len(self.cells):
-            raise ValueError(f"start {start} out of range 0..{len(self.cells) - 1}")
+        start = self.pick_start(seed, start, len(self.cells))
         self.pos = self.cells[start]
         self.t = 0
         return self._obs(0.0, self.pos == self.goal)

@@ -79,12 +79,7 @@ class StereoPairWorld(World):
         return StepResult({"left": left, "right": right}, reward, done)
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
-        if seed is not None:
-            self.rng = np.random.default_rng(seed)
-        if start is None or start < 0:
-            start = int(self.rng.integers(len(self.points)))
-        if start >= len(self.points):
-            raise ValueError(f"start {start} out of range 0..{len(self.points) - 1}")
+        start = self.pick_start(seed, start, len(self.points))
         self.row, self.col = (int(v) for v in self.points[start])
         if start not in self._goals:
             self._goals[start] = int(np.argmin([foveal_difference(*self._patches(k)) for k in range(self.max_shift + 1)]))

@@ -148,12 +148,7 @@ class VergenceWorld(World):
         return StepResult({"left": left, "right": right}, reward, done)
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
-        if seed is not None:
-            self.rng = np.random.default_rng(seed)
-        if start is None or start < 0:
-            start = int(self.rng.integers(len(self.distances)))
-        if start >= len(self.distances):
-            raise ValueError(f"start {start} out of range 0..{len(self.distances) - 1}")
+        start = self.pick_start(seed, start, len(self.distances))
         if self.z != float(self.distances[start]) or not self._goals_known(start):
             self.z = float(self.distances[start])
             self._goal_cache[start] = int(np.argmin(self.differences()))

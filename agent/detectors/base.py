@@ -94,3 +94,21 @@ class RunningMoments:
 
     def z(self, x: float) -> float:
         return (x - self.mean) / self.sd
+
+
+class ReferencedDetector(DropDetector):
+    """A detector that compares the stream with a lagged reference regime (RunningMoments)."""
+
+    def __init__(self, warmup: int, rate: float) -> None:
+        super().__init__()
+        self._ref = RunningMoments(warmup, rate)
+
+    def reset(self) -> None:
+        self.n = 0
+        self.drift_detected = False
+        self._ref.reset()
+        self._clear()
+
+    @abc.abstractmethod
+    def _clear(self) -> None:
+        """Forget the detector's own statistic."""

@@ -6,24 +6,20 @@ N(0,1) data is about 5e4 steps and a 2-sigma drop is detected in about 7 steps."
 
 from __future__ import annotations
 
-from agent.detectors.base import DropDetector, RunningMoments
+from agent.detectors.base import ReferencedDetector
 
 
-class CUSUM(DropDetector):
+class CUSUM(ReferencedDetector):
     name = "cusum"
 
     def __init__(self, k: float = 0.5, h: float = 9.0, warmup: int = 100, rate: float = 0.002) -> None:
-        super().__init__()
+        super().__init__(warmup, rate)
         if k < 0 or h <= 0:
             raise ValueError("k must be >= 0 and h > 0")
         self.k, self.h = k, h
-        self._ref = RunningMoments(warmup, rate)
         self.reset()
 
-    def reset(self) -> None:
-        self.n = 0
-        self.drift_detected = False
-        self._ref.reset()
+    def _clear(self) -> None:
         self._s = 0.0
 
     @property

@@ -8,24 +8,20 @@ from __future__ import annotations
 import collections
 import math
 
-from agent.detectors.base import DropDetector, RunningMoments
+from agent.detectors.base import ReferencedDetector
 
 
-class MovingAverageDrop(DropDetector):
+class MovingAverageDrop(ReferencedDetector):
     name = "moving_average"
 
     def __init__(self, window: int = 20, drop: float = 5.0, warmup: int = 200, rate: float = 0.002) -> None:
-        super().__init__()
+        super().__init__(warmup, rate)
         if window < 1 or drop <= 0:
             raise ValueError("window must be >= 1 and drop > 0")
         self.window, self.drop = window, drop
-        self._ref = RunningMoments(warmup, rate)
         self.reset()
 
-    def reset(self) -> None:
-        self.n = 0
-        self.drift_detected = False
-        self._ref.reset()
+    def _clear(self) -> None:
         self._buf: collections.deque[float] = collections.deque(maxlen=self.window)
         self._stat = 0.0
 

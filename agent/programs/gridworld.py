@@ -14,6 +14,7 @@ import numpy as np
 from agent.embedding import classical_mds, trace_distances, update_trace_distances
 from agent.learners.lspi import LSPI, TabularBasis
 from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from agent.programs.sweep import StartStateSweep
 from protocol.errors import SpecMismatch
 from protocol.messages import Observation, WorldSpec
 
@@ -44,11 +45,8 @@ class GridworldProgram(Program):
         self.new_samples = 0
         self.version = 0
         self._prev: tuple[int, int] | None = None
-        self._start = 0
-        self._traces: list[list[int]] = []
-        self._trace: list[int] = []
+        self._sweep = StartStateSweep(spec.n_starts, max_trace)
         self._seen: set[tuple[int, int]] = set()
-        self._reached = 0
         self._last_traces: list[list[int]] = []
         self._D: np.ndarray | None = None
 
@@ -59,31 +57,40 @@ class GridworldProgram(Program):
             raise SpecMismatch(f"state id {s} outside 0..{self.n_states - 1}")
         return s
 
-    def _choose(self, s: int) -> int:
+    def _choose(self, obs: Observation, trace: list[int]) -> int:
+        s = self._state(obs)
+        if not trace:
+            self._seen = set()
+        self._seen.add((s, trace[-1] if trace else -1))
         if self.policy == "random":
             return int(self.rng.integers(self.n_actions))
-        prefer = self._trace[-1] if self._trace else None
-        return self.lspi.greedy(s, prefer)
+        return self.lspi.greedy(s, trace[-1] if trace else None)
+
+    def _cycle(self, obs: Observation, trace: list[int]) -> bool:
+        """The greedy policy is a deterministic function of (state, previous action): a repeat is a
+        cycle that never reaches the goal, so the trace ends there."""
+        return bool(trace) and self.policy == "lspi" and (self._state(obs), trace[-1]) in self._seen
 
     def _finish_embedding(self, step: int) -> None:
         # only the rows of start states whose trace changed since the last embedding are recomputed
+        traces = self._sweep.traces
         prev, D = self._last_traces, self._D
-        if D is None or len(prev) != len(self._traces):
-            D = trace_distances(self._traces, kind="edit", substitution_cost=self.substitution_cost)
+        if D is None or len(prev) != len(traces):
+            D = trace_distances(traces, kind="edit", substitution_cost=self.substitution_cost)
         else:
-            changed = [i for i, (a, b) in enumerate(zip(prev, self._traces)) if a != b]
-            D = update_trace_distances(D, self._traces, changed, kind="edit", substitution_cost=self.substitution_cost)
-        self._last_traces, self._D = [list(t) for t in self._traces], D
+            changed = [i for i, (a, b) in enumerate(zip(prev, traces)) if a != b]
+            D = update_trace_distances(D, traces, changed, kind="edit", substitution_cost=self.substitution_cost)
+        self._last_traces, self._D = [list(t) for t in traces], D
         mds = classical_mds(D, self.dims)
         self.version += 1
-        reached = self._reached
+        reached = self._sweep.rewarded
         trigger = "random_policy" if self.policy == "random" else f"policy_iteration {self.lspi.iterations}"
         self.emit(EmbeddingOutput(
-            trigger=trigger, ids=tuple(range(len(self._traces))), coordinates=mds.coordinates,
+            trigger=trigger, ids=tuple(range(len(traces))), coordinates=mds.coordinates,
             eigenvalues=tuple(float(e) for e in mds.eigenvalues[: min(10, len(mds.eigenvalues))]), step=step,
             metrics={"lspi_iterations": float(self.lspi.iterations), "samples": float(self.lspi.n_samples),
-                     "goal_reached_fraction": reached / len(self._traces),
-                     "mean_trace_length": float(np.mean([len(t) for t in self._traces]))},
+                     "goal_reached_fraction": reached / len(traces),
+                     "mean_trace_length": float(np.mean([len(t) for t in traces]))},
         ))
 
     # the program -------------------------------------------------------------------------------
@@ -102,39 +109,23 @@ class GridworldProgram(Program):
                     self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}",
                                           obs.step, {"weight_change": change,
                                                      "samples": float(self.lspi.n_samples)}))
-                self.phase, self._start, self._traces, self._trace = "embed", 0, [], []
-                self._reached, self._seen = 0, set()
-                return Decision(reset=True, start=0)
+                self.phase, self._seen = "embed", set()
+                self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
+                return self._sweep.begin()
             if obs.done:
                 return Decision(reset=True, start=-1)
             a = int(self.rng.integers(self.n_actions))
             self._prev = (s, a)
             return Decision((float(a),))
 
-        # phase == "embed": run the greedy policy from start state self._start
-        if obs.t == 0 and obs.start != self._start:
-            return Decision(reset=True, start=self._start)  # e.g. the world restarted mid-episode
-        prev = self._trace[-1] if self._trace else -1
-        # The greedy policy is a deterministic function of (state, previous action): a repeat is a
-        # cycle that never reaches the goal, so the trace ends there.
-        cycle = self.policy == "lspi" and (s, prev) in self._seen
-        if obs.done or cycle or len(self._trace) >= self.max_trace:
-            self._reached += int(obs.done and obs.reward > 0 or (obs.done and not self._trace))
-            self._traces.append(self._trace)
-            self._trace = []
-            self._seen = set()
-            self._start += 1
-            if self._start < self.spec.n_starts:
-                return Decision(reset=True, start=self._start)
+        # phase == "embed": run the greedy policy from every start state
+        dec = self._sweep.step(obs, self._choose, self._cycle)
+        if self._sweep.finished:
             self._finish_embedding(obs.step)
             self.phase = "explore"
-            return Decision(reset=True, start=-1)
-        self._seen.add((s, prev))
-        a = self._choose(s)
-        self._trace.append(a)
-        return Decision((float(a),))
+        return dec
 
     def world_restarted(self) -> None:
         self._prev = None
-        self._trace = []
+        self._sweep.interrupted()
         self._seen = set()

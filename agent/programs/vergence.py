@@ -16,6 +16,7 @@ import numpy as np
 from agent.embedding import classical_mds, trace_distances
 from agent.learners.lspi import LSPI, RBFBasis
 from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from agent.programs.sweep import StartStateSweep
 from protocol.errors import SpecMismatch
 from protocol.messages import Observation, WorldSpec
 
@@ -45,10 +46,7 @@ class VergenceProgram(Program):
         self.phase = "explore"
         self.new_samples = 0
         self._prev: tuple[float, int] | None = None
-        self._start = 0
-        self._traces: list[list[int]] = []
-        self._trace: list[int] = []
-        self._reached = 0
+        self._sweep = StartStateSweep(spec.n_starts, max_trace)
 
     def act(self, obs: Observation) -> Decision:
         d = foveal_difference(obs)
@@ -62,39 +60,31 @@ class VergenceProgram(Program):
                 change = self.lspi.iterate()
                 self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}", obs.step,
                                       {"weight_change": change}))
-                self.phase, self._start, self._traces, self._trace, self._reached = "embed", 0, [], [], 0
-                return Decision(reset=True, start=0)
+                self.phase = "embed"
+                self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
+                return self._sweep.begin()
             if obs.done:
                 return Decision(reset=True, start=-1)
             a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
             self._prev = (d, a)
             return Decision((float(a),))
-        if obs.t == 0 and obs.start != self._start:
-            return Decision(reset=True, start=self._start)
-        if obs.done or len(self._trace) >= self.max_trace:
-            self._reached += int(obs.reward > 0)
-            self._traces.append(self._trace)
-            self._trace = []
-            self._start += 1
-            if self._start < self.spec.n_starts:
-                return Decision(reset=True, start=self._start)
+        dec = self._sweep.step(obs, lambda o, trace: self.lspi.greedy(foveal_difference(o)))
+        if self._sweep.finished:
             self._embed(obs.step)
             self.phase = "explore"
-            return Decision(reset=True, start=-1)
-        a = self.lspi.greedy(d)
-        self._trace.append(a)
-        return Decision((float(a),))
+        return dec
 
     def _embed(self, step: int) -> None:
-        D = trace_distances(self._traces, kind="edit", substitution_cost=2)
+        traces = self._sweep.traces
+        D = trace_distances(traces, kind="edit", substitution_cost=2)
         mds = classical_mds(D, 1)
-        n = len(self._traces)
+        n = len(traces)
         self.emit(EmbeddingOutput(
             f"policy_iteration {self.lspi.iterations}", tuple(range(n)), mds.coordinates,
             tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
-            {"lspi_iterations": float(self.lspi.iterations), "policy_success": self._reached / n,
-             "mean_trace_length": float(np.mean([len(t) for t in self._traces]))}))
+            {"lspi_iterations": float(self.lspi.iterations), "policy_success": self._sweep.rewarded / n,
+             "mean_trace_length": float(np.mean([len(t) for t in traces]))}))
 
     def world_restarted(self) -> None:
         self._prev = None
-        self._trace = []
+        self._sweep.interrupted()

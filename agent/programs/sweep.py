@@ -1,0 +1,48 @@
+"""Running a policy from every start state in turn and collecting its action traces: the part of
+step 2 of the algorithm (ch. 3) that every trace-embedding program shares."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from agent.programs.base import Decision
+from protocol.messages import Observation
+
+
+class StartStateSweep:
+    """Drive the world through start states 0..n-1 (each by a reset), let `choose(obs, trace)` pick
+    the actions, and record each trace until the episode ends, `max_trace` actions are taken, or
+    `stop(obs, trace)` says the policy is stuck. `finished` is set after the last start state."""
+
+    def __init__(self, n_starts: int, max_trace: int) -> None:
+        self.n_starts = n_starts
+        self.max_trace = max_trace
+        self.traces: list[list[int]] = []
+        self.rewarded = 0
+        self.finished = False
+        self._start = 0
+        self._trace: list[int] = []
+
+    def begin(self) -> Decision:
+        return Decision(reset=True, start=0)
+
+    def step(self, obs: Observation, choose: Callable[[Observation, list[int]], int],
+             stop: Callable[[Observation, list[int]], bool] | None = None) -> Decision:
+        if obs.t == 0 and obs.start != self._start:
+            return Decision(reset=True, start=self._start)  # e.g. the world restarted mid-episode
+        if obs.done or len(self._trace) >= self.max_trace or (stop is not None and stop(obs, self._trace)):
+            self.rewarded += int(obs.done and (obs.reward > 0 or not self._trace))
+            self.traces.append(self._trace)
+            self._trace = []
+            self._start += 1
+            if self._start < self.n_starts:
+                return Decision(reset=True, start=self._start)
+            self.finished = True
+            return Decision(reset=True, start=-1)
+        a = choose(obs, self._trace)
+        self._trace.append(a)
+        return Decision((float(a),))
+
+    def interrupted(self) -> None:
+        """The world restarted: the trace in progress starts again."""
+        self._trace = []
