@@ -1,0 +1,33 @@
+"""Velocity from a noisy position signal: a constant-velocity Kalman filter (filterpy), as ch. 8
+derives the car's velocity from its learned (embedded) position. The default process noise
+(1e-5) is the square of the largest velocity change per step of the mountain car (p + A)."""
+
+from __future__ import annotations
+
+import numpy as np
+from filterpy.common import Q_discrete_white_noise
+from filterpy.kalman import KalmanFilter
+
+
+class VelocityFilter:
+    def __init__(self, dt: float = 1.0, measurement_var: float = 1e-3, process_var: float = 1e-5) -> None:
+        if dt <= 0 or measurement_var <= 0 or process_var <= 0:
+            raise ValueError("dt, measurement_var and process_var must be > 0")
+        self.dt, self.measurement_var, self.process_var = dt, measurement_var, process_var
+        self.reset()
+
+    def reset(self, position: float | None = None) -> None:
+        kf = KalmanFilter(dim_x=2, dim_z=1)
+        kf.F = np.array([[1.0, self.dt], [0.0, 1.0]])
+        kf.H = np.array([[1.0, 0.0]])
+        kf.R = np.array([[self.measurement_var]])
+        kf.Q = Q_discrete_white_noise(2, self.dt, self.process_var)
+        kf.P = np.diag([self.measurement_var, 1.0])
+        kf.x = np.array([[0.0 if position is None else float(position)], [0.0]])
+        self._kf = kf
+
+    def update(self, position: float) -> tuple[float, float]:
+        """Feed one position measurement; returns the filtered (position, velocity)."""
+        self._kf.predict()
+        self._kf.update(np.array([[float(position)]]))
+        return float(self._kf.x[0, 0]), float(self._kf.x[1, 0])

@@ -1,0 +1,72 @@
+"""Sarsa(lambda) with tile coding (CMAC), as ch. 8 uses on (position, velocity).
+
+Tile coding: `n_tilings` offset grids over the box `low..high`, `tiles` cells per dimension; a
+state activates one tile per tiling. Q(s, a) = sum of the active tiles' weights for a. Replacing
+eligibility traces; epsilon-greedy; step size alpha / n_tilings per tile.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class TileCoder:
+    def __init__(self, low: np.ndarray, high: np.ndarray, tiles: int = 10, n_tilings: int = 8) -> None:
+        self.low, self.high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+        if self.low.shape != self.high.shape or not (self.high > self.low).all():
+            raise ValueError("low/high must have the same shape and high > low")
+        if tiles < 1 or n_tilings < 1:
+            raise ValueError("tiles and n_tilings must be >= 1")
+        self.tiles, self.n_tilings = tiles, n_tilings
+        self.dims = self.low.size
+        self.per_tiling = (tiles + 1) ** self.dims
+        self.size = self.per_tiling * n_tilings
+        # tiling j is offset by j/n_tilings of a tile, with a different stride per dimension
+        self._offsets = (np.arange(n_tilings)[:, None] * (1 + 2 * np.arange(self.dims))[None, :] / n_tilings) % 1.0
+        self._strides = (tiles + 1) ** np.arange(self.dims)
+
+    def active(self, state: np.ndarray) -> np.ndarray:
+        """Indices of the `n_tilings` active tiles."""
+        s = (np.clip(np.asarray(state, dtype=np.float64), self.low, self.high) - self.low) / (self.high - self.low)
+        cells = np.floor(s[None, :] * self.tiles + self._offsets).astype(np.int64)
+        cells = np.minimum(cells, self.tiles)
+        return cells @ self._strides + np.arange(self.n_tilings) * self.per_tiling
+
+
+class SarsaLambda:
+    def __init__(self, coder: TileCoder, n_actions: int, alpha: float = 0.3, gamma: float = 0.99,
+                 lam: float = 0.9, epsilon: float = 0.0, seed: int = 0) -> None:
+        if not 0 < alpha <= 1 or not 0 <= gamma <= 1 or not 0 <= lam <= 1 or not 0 <= epsilon <= 1:
+            raise ValueError("need 0 < alpha <= 1 and gamma, lambda, epsilon in [0, 1]")
+        self.coder, self.n_actions = coder, n_actions
+        self.alpha, self.gamma, self.lam, self.epsilon = alpha, gamma, lam, epsilon
+        self.seed = seed
+        self.reset()
+
+    def reset(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+        self.w = np.zeros((self.n_actions, self.coder.size))
+        self.z = np.zeros_like(self.w)
+
+    def q(self, state: np.ndarray) -> np.ndarray:
+        return self.w[:, self.coder.active(state)].sum(axis=1)
+
+    def act(self, state: np.ndarray) -> int:
+        if self.rng.random() < self.epsilon:
+            return int(self.rng.integers(self.n_actions))
+        q = self.q(state)
+        best = np.flatnonzero(q == q.max())
+        return int(best[self.rng.integers(best.size)])
+
+    def begin_episode(self) -> None:
+        self.z[:] = 0.0
+
+    def learn_one(self, s: np.ndarray, a: int, r: float, s2: np.ndarray, a2: int | None) -> None:
+        """One Sarsa(lambda) update; `a2 = None` when s2 is terminal."""
+        tiles = self.coder.active(s)
+        target = r + (0.0 if a2 is None else self.gamma * self.q(s2)[a2])
+        delta = target - self.w[a, tiles].sum()
+        self.z *= self.gamma * self.lam
+        self.z[:, tiles] = 0.0
+        self.z[a, tiles] = 1.0  # replacing traces
+        self.w += (self.alpha / self.coder.n_tilings) * delta * self.z
