@@ -138,6 +138,7 @@ def test_sigkilled_recorder_leaves_a_readable_file(procs, endpoint, tmp_path):
     assert procs.stop(r1) == 0
     upto = sum(1 for r in read(ref) if r.log_time <= t_kill)
     got = sum(1 for _ in read(victim))
+    print(f"SIGKILLed recorder kept {got} of {upto} messages up to the kill ({got / upto:.1%})")
     assert upto > 3000 and got >= 0.95 * upto, (got, upto)
     # replay reads it; recover makes a complete file every tool opens
     off = subprocess.run([sys.executable, "-m", "tools.cli", "replay", victim, "--offline"], cwd=ROOT,

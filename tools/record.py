@@ -21,14 +21,14 @@ log = logging.getLogger("sme.record")
 
 class Recorder:
     """Subscribes to `key_expr` and writes every message on one writer thread. Chunks are closed
-    and pushed to the file at least every `flush_every` seconds, and the file is unbuffered, so a
-    recorder killed with SIGKILL loses at most the last second (or chunk) of messages: what reached the
+    and pushed to the OS at least every `flush_every` seconds (0.2 s), so a
+    recorder killed with SIGKILL loses at most the last 0.2 s (or chunk) of messages: what reached the
     OS survives the kill. When a world
     appears, its spec and truth (served by queryables, not published) are fetched and written too,
     so a recording can be replayed into a fresh agent."""
 
     def __init__(self, bus: Bus, path: str, key_expr: str = keys.ALL, compression: str = "zstd",
-                 chunk_size: int = 64 * 1024, flush_every: float = 1.0) -> None:
+                 chunk_size: int = 64 * 1024, flush_every: float = 0.2) -> None:
         self.bus = bus
         self.path = path
         self.key_expr = key_expr
@@ -120,7 +120,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description="Record every message on the bus (observations, actions, controls, truth, "
                        "specs, embeddings, agent events, camera frames as foxglove.RawImage) into an MCAP file "
                        "with its protobuf schemas embedded, so standard tools (mcap CLI, Foxglove, `rerun mcap "
-                       "convert`) read it. Chunks are flushed every second: a recorder killed with SIGKILL "
+                       "convert`) read it. Chunks are flushed every 0.2 s: a recorder killed with SIGKILL "
                        "leaves a file `sme replay` reads up to its last complete chunk, and `sme recover` turns "
                        "into a complete one. Stop with Ctrl-C or --seconds.")
     p.add_argument("file", help="output .mcap file")
