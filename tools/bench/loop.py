@@ -58,7 +58,7 @@ def inprocess(steps: int, obs_bytes: int) -> dict:
             "p99_ms": round(float(np.percentile(lat, 99)) * 1e3, 4)}
 
 
-def over_zenoh(steps: int, obs_bytes: int, timeout: float = 300.0) -> dict:
+def over_zenoh(steps: int, obs_bytes: int, timeout: float = 300.0, world_args: tuple[str, ...] = ()) -> dict:
     ep = f"tcp/127.0.0.1:{free_port()}"
     with tempfile.TemporaryDirectory() as tmp, Bus(BusConfig.for_role("agent", ep)) as bus:
         daemon = AgentDaemon(bus, "bench")
@@ -67,7 +67,7 @@ def over_zenoh(steps: int, obs_bytes: int, timeout: float = 300.0) -> dict:
         th.start()
         stats_file = os.path.join(tmp, "stats.json")
         cmd = [sys.executable, "-m", "tools.cli", "world", "bench", "--id", "bench", "--steps", str(steps),
-               "--param", f"obs_bytes={obs_bytes}", "--stats-json", stats_file, "--connect", ep, "-q"]
+               "--param", f"obs_bytes={obs_bytes}", "--stats-json", stats_file, "--connect", ep, "-q", *world_args]
         proc = subprocess.Popen(cmd, cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
         try:
             proc.wait(timeout=timeout)
