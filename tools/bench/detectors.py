@@ -1,6 +1,6 @@
 """`sme bench detectors`: detection delay and false alarms of the reward-drop detectors, with
 river's ADWIN and PageHinkley as peers, on (a) synthetic Gaussian streams with a 2-sigma drop and
-(b) the post-saccade reward streams of retina lesion and reversal runs. The default detector is the
+(b) the retina lesion and reversal runs, as the agent sees them (log of the post-saccade activation). The default detector is the
 one that meets "median delay <= 10 steps at <= 0.3 false alarms per 10k steps" on (a)."""
 
 from __future__ import annotations
@@ -75,7 +75,8 @@ def retina_streams(seeds: int, steps: int) -> list[tuple[str, np.ndarray, int]]:
             params = {"u": 4, "v": 4, "radius": 5} if kind == "lesion" else None
             r = R.perturbation(s, kind, at=at, steps=steps, detector=None, supersample=1, params=params,
                                embed_every=10**9)
-            out.append((f"{kind} seed {s}", np.asarray(r.rewards), at))
+            # the signal the agent's detector watches: the retina program's performance, log(1 + activation)
+            out.append((f"{kind} seed {s}", np.log1p(np.asarray(r.rewards)), at))
     return out
 
 
