@@ -17,8 +17,8 @@ import json
 import logging
 import threading
 import time
-from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Iterator, NamedTuple
+from dataclasses import dataclass, replace
+from typing import Any, Callable, NamedTuple
 
 import zenoh
 
@@ -334,14 +334,3 @@ class Bus:
             pass
         if entity in self._declared:
             self._declared.remove(entity)
-
-
-def open_bus(config: BusConfig) -> Bus:
-    return Bus(config)
-
-
-def iter_inbox(box: Inbox, stop: threading.Event, poll: float = 0.2) -> Iterator[BusMessage]:
-    while not stop.is_set():
-        msg = box.get(poll)
-        if msg is not None:
-            yield msg

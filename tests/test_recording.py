@@ -10,15 +10,11 @@ import subprocess
 import sys
 import threading
 import time
-from collections import Counter
 
 import numpy as np
 import pytest
 
-from protocol import codec
-from protocol.messages import Embedding
 from tests.conftest import ROOT, wait_for
-from tests.test_integration_bus import link, status
 from tools.common import free_port
 from tools.mcap_io import read
 from tools.replay import replay_offline

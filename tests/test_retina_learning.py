@@ -1,7 +1,6 @@
 """Shortened, seeded versions of the chapter-4 experiments (the full ones: `sme reproduce retina`)."""
 
 import numpy as np
-import pytest
 
 from tools.experiments import retina as R
 

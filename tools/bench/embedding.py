@@ -97,7 +97,7 @@ def run(sizes: list[int], landmark_n: int, smacof_max: int, exact_landmark: bool
                                                       random_state=0, max_iter=300).fit_transform(D64))
                 rows.append(row("sklearn MDS (SMACOF) from distances", kind, n, msec2, mmb2, procrustes_error(P, sm),
                                 ratio_vs_ours=round(msec2 / msec, 1)))
-            del D, D64
+            D = D64 = None  # free the n x n matrices before the next size
         if landmark_n and kind == "continuous":
             traces, P = continuous_traces(landmark_n, seed=1)
             res, sec, mb = measure(lambda: landmark_trace_embedding(traces, 2, n_landmarks=300))
