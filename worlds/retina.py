@@ -27,6 +27,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from worlds.base import PerturbationError, StepResult, World, param
+from worlds.bullet import disconnect
 
 SCENES = ("spot", "spots", "texture")
 
@@ -241,9 +242,5 @@ class RetinaWorld(World):
         return Truth(self.world_id, "fields", {"positions": pos, "pixels": self.centres.copy()})
 
     def close(self) -> None:
-        if self._client is not None:
-            try:
-                self._client.disconnect()
-            except p.error:
-                pass
-            self._client = None
+        disconnect(self._client)
+        self._client = None

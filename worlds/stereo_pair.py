@@ -18,7 +18,7 @@ from scipy import ndimage
 
 from protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
 from worlds.base import StepResult, World, param
-from worlds.vergence import CONVERGE, DIVERGE, foveal_difference
+from worlds.vergence import foveal_difference, verge
 
 
 def salient_points(img: np.ndarray, disp: np.ndarray, n: int, radius: int, max_shift: int, spacing: int = 25,
@@ -88,11 +88,8 @@ class StereoPairWorld(World):
         return self._obs(0.0, self.goal == 0)
 
     def step(self, action: np.ndarray) -> StepResult:
-        a = int(np.asarray(action).reshape(-1)[0])
-        if a not in (CONVERGE, DIVERGE):
-            raise ValueError(f"action must be 0 (converge) or 1 (diverge), got {a}")
+        self.k = verge(self.k, action, self.max_shift)
         self.t += 1
-        self.k = min(self.k + 1, self.max_shift) if a == CONVERGE else max(self.k - 1, 0)
         if self.k == self.goal:
             return self._obs(1.0, True)
         return self._obs(0.0, self.t >= self.max_episode_steps)

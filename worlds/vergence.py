@@ -23,8 +23,17 @@ from pybullet_utils.bullet_client import BulletClient
 
 from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from worlds.base import PerturbationError, StepResult, World, param
+from worlds.bullet import disconnect
 
 CONVERGE, DIVERGE = 0, 1
+
+
+def verge(k: int, action: np.ndarray, k_max: int) -> int:
+    """The vergence (in steps, 0..k_max) after one converge (0) or diverge (1) action."""
+    a = int(np.asarray(action).reshape(-1)[0])
+    if a not in (CONVERGE, DIVERGE):
+        raise ValueError(f"action must be 0 (converge) or 1 (diverge), got {a}")
+    return min(k + 1, k_max) if a == CONVERGE else max(k - 1, 0)
 
 
 def foveal_difference(left: np.ndarray, right: np.ndarray) -> float:
@@ -149,22 +158,16 @@ class VergenceWorld(World):
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
         start = self.pick_start(seed, start, len(self.distances))
-        if self.z != float(self.distances[start]) or not self._goals_known(start):
-            self.z = float(self.distances[start])
+        self.z = float(self.distances[start])
+        if start not in self._goal_cache:  # the goal of a start state is fixed until the body changes
             self._goal_cache[start] = int(np.argmin(self.differences()))
         self.goal = self._goal_cache[start]
         self.theta, self.k, self.t = 0.0, 0, 0
         return self._obs(0.0, False)
 
-    def _goals_known(self, start: int) -> bool:
-        return start in self._goal_cache
-
     def step(self, action: np.ndarray) -> StepResult:
-        a = int(np.asarray(action).reshape(-1)[0])
-        if a not in (CONVERGE, DIVERGE):
-            raise ValueError(f"action must be 0 (converge) or 1 (diverge), got {a}")
+        self.k = verge(self.k, action, self.max_episode_steps)
         self.t += 1
-        self.k = min(self.k + 1, self.max_episode_steps) if a == CONVERGE else max(self.k - 1, 0)
         self.theta = self.k * self.step_rad
         if self.k == self.goal:
             return self._obs(1.0, True)
@@ -187,9 +190,5 @@ class VergenceWorld(World):
                      {"positions": self.true_angle(self.distances)[:, None], "distance": self.distances[:, None].copy()})
 
     def close(self) -> None:
-        if self._c is not None:
-            try:
-                self._c.disconnect()
-            except p.error:
-                pass
-            self._c = None
+        disconnect(self._c)
+        self._c = None

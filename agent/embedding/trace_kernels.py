@@ -52,13 +52,14 @@ def dtw_numpy(a: np.ndarray, b: np.ndarray) -> float:
 if HAVE_NUMBA:
 
     @numba.njit(cache=True, nogil=True)
-    def _row_sum(X, i, j):  # pragma: no cover - compiled
+    def _pair_sum(A, i, B, j):  # pragma: no cover - compiled
+        """sum_t ||A[i, t] - B[j, t]||: the padded-sum distance of one pair."""
         s = 0.0
-        L, d = X.shape[1], X.shape[2]
+        L, d = A.shape[1], A.shape[2]
         for t in range(L):
             acc = 0.0
             for c in range(d):
-                diff = X[i, t, c] - X[j, t, c]
+                diff = A[i, t, c] - B[j, t, c]
                 acc += diff * diff
             s += np.sqrt(acc)
         return s
@@ -67,7 +68,7 @@ if HAVE_NUMBA:
     def _fill_row(X, i, out):  # pragma: no cover - compiled
         out[i, i] = 0
         for j in range(i + 1, X.shape[0]):
-            v = _row_sum(X, i, j)
+            v = _pair_sum(X, i, X, j)
             out[i, j] = v
             out[j, i] = v
 
@@ -82,17 +83,9 @@ if HAVE_NUMBA:
 
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _padded_sum_cross(A, B, out):  # pragma: no cover - compiled
-        na, nb, L, d = A.shape[0], B.shape[0], A.shape[1], A.shape[2]
-        for i in numba.prange(na):
-            for j in range(nb):
-                s = 0.0
-                for t in range(L):
-                    acc = 0.0
-                    for c in range(d):
-                        diff = A[i, t, c] - B[j, t, c]
-                        acc += diff * diff
-                    s += np.sqrt(acc)
-                out[i, j] = s
+        for i in numba.prange(A.shape[0]):
+            for j in range(B.shape[0]):
+                out[i, j] = _pair_sum(A, i, B, j)
 
     @numba.njit(cache=True, nogil=True)
     def _dtw(a, la, b, lb, buf):  # pragma: no cover - compiled
