@@ -5,7 +5,9 @@ their observations (and truth updates and camera frames) published at the record
 by --speed. A fresh agent attaches and learns from them as if live; since programs are
 deterministic given their seed and observations, it takes the same decisions as the recorded agent
 did, i.e. it observes the recorded actions. Before the timed replay starts, the first observation
-is repeated until an agent answers it, so nothing is missed.
+is repeated until an agent answers it, so nothing is missed; after that each observation waits for
+the agent's answer to the one before (at most --answer-timeout), so a slow agent slows the replay
+down instead of losing observations: --speed is an upper bound.
 
 Offline: the recording is fed straight through the daemon's WorldLink and programs, no bus; the
 embeddings are printed (or written) and compared byte for byte with those the live agent published
@@ -32,7 +34,7 @@ from agent.programs.registry import make_program
 from protocol import codec, keys
 from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from protocol.errors import ProtocolError
-from protocol.messages import AgentEvent, Embedding, Observation, Truth, WorldSpec
+from protocol.messages import Action, AgentEvent, Embedding, Observation, Truth, WorldSpec
 from tools.common import embedding_dict, print_json
 from tools.mcap_io import Record, read
 
@@ -168,7 +170,8 @@ class Replayer:
     WORLD_KINDS = ("obs", "truth", "image")
 
     def __init__(self, bus: Bus, path: str, speed: float = 1.0, start: float = 0.0, end: float | None = None,
-                 remap: dict[str, str] | None = None, what: str = "world", handshake: float = 10.0) -> None:
+                 remap: dict[str, str] | None = None, what: str = "world", handshake: float = 10.0,
+                 answer_timeout: float = 5.0) -> None:
         if speed <= 0:
             raise ValueError("--speed must be > 0")
         if what not in ("world", "all"):
@@ -178,14 +181,43 @@ class Replayer:
         self.remap = remap or {}
         self.what = what
         self.handshake = handshake
+        self.answer_timeout = answer_timeout
         self.published = 0
+        self.unanswered = 0
         self.stop_event = threading.Event()
         self._specs: dict[str, bytes] = {}
         self._truths: dict[str, bytes] = {}
         self._answered: dict[str, threading.Event] = {}
+        self._last_answer: dict[str, int] = {}
+        self._pending: dict[str, int] = {}
+        self._cond = threading.Condition()
+
+    def _on_action(self, wid: str, msg: Any) -> None:
+        try:
+            step = codec.decode(Action, msg.payload).step
+        except ProtocolError:
+            return
+        with self._cond:
+            self._last_answer[wid] = max(step, self._last_answer.get(wid, -1))
+            self._cond.notify_all()
+        self._answered[wid].set()
+
+    def _wait_answer(self, wid: str) -> None:
+        """Block until the agent answered the last observation published for `wid` (bounded)."""
+        want = self._pending.pop(wid, None)
+        if want is None:
+            return
+        with self._cond:
+            ok = self._cond.wait_for(lambda: self._last_answer.get(wid, -1) >= want or self.stop_event.is_set(),
+                                     self.answer_timeout)
+        if not ok:
+            self.unanswered += 1
+            if self.unanswered == 1:
+                log.warning("world %s: no answer to step %d within %.1f s; going on without it", wid, want,
+                            self.answer_timeout)
 
     def _declare_world(self, wid: str) -> None:
-        self._answered[wid] = ev = threading.Event()
+        self._answered[wid] = threading.Event()
         self.bus.queryable(keys.world_spec(wid), lambda k, p, w=wid: self._specs[w], codec.schema_name(WorldSpec))
 
         def truth(k: str, p: bytes | None, w: str = wid) -> bytes:
@@ -194,7 +226,7 @@ class Replayer:
             return self._truths[w]
 
         self.bus.queryable(keys.world_truth(wid), truth, codec.schema_name(Truth))
-        self.bus.subscribe(keys.world_act(wid), lambda m: ev.set())
+        self.bus.subscribe(keys.world_act(wid), lambda m, w=wid: self._on_action(w, m))
         self.bus.token(keys.alive_world(wid))
 
     def run(self, loop_index: int = 0) -> int:
@@ -202,6 +234,9 @@ class Replayer:
         if not records:
             return 0
         session = f"-replay{loop_index}" if loop_index else ""
+        with self._cond:  # each pass is a new world session whose steps count from 0 again
+            self._last_answer.clear()
+            self._pending.clear()
         t_first = records[0].log_time
         t_lo = t_first + int(self.start * 1e9)
         t_hi = None if self.end is None else t_first + int(self.end * 1e9)
@@ -235,11 +270,19 @@ class Replayer:
                 delay = (rec.log_time - t0_rec) / 1e9 / self.speed - (time.monotonic() - t0_wall)
                 if delay > 0:
                     self.stop_event.wait(delay)
+            paced = kind == "obs" and new in self._answered and t0_wall is not None
+            if paced:
+                self._wait_answer(new)
             pub = pubs.get(rec.topic)
             if pub is None:
                 pub = pubs[rec.topic] = self.bus.publisher(rec.topic, rec.schema or None)
             pub.put(rec.data)
             self.published += 1
+            if paced:
+                try:
+                    self._pending[new] = codec.decode(Observation, rec.data).step
+                except ProtocolError:
+                    pass  # bad recorded bytes: nobody will answer them
             if t0_wall is None and kind == "obs" and self.what == "world" and new in self._answered:
                 # hold the first observation until an agent answers it
                 deadline = time.monotonic() + self.handshake
@@ -248,6 +291,8 @@ class Replayer:
                 t0_wall, t0_rec = time.monotonic(), rec.log_time
             elif t0_wall is None:
                 t0_wall, t0_rec = time.monotonic(), rec.log_time
+        for wid in list(self._pending):
+            self._wait_answer(wid)
         return self.published
 
 
@@ -265,6 +310,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--what", choices=["world", "all"], default="world",
                    help="world: the worlds' side only, for a fresh agent to learn from (default); all: every "
                    "recorded message (embeddings and events too), for `sme watch`/`sme view`")
+    p.add_argument("--answer-timeout", type=float, default=5.0, metavar="S",
+                   help="--what world: wait at most S seconds for the agent's answer to an observation before "
+                   "publishing the next one (default 5); the replay never outruns the agent")
     p.add_argument("--offline", action="store_true",
                    help="no bus: feed the recording through the agent's programs and print the embeddings")
     p.add_argument("--json", action="store_true", help="--offline: one JSON object per embedding")
@@ -314,7 +362,8 @@ def main_args(args: argparse.Namespace) -> int:
         print(f"sme replay: {e}", file=sys.stderr)
         return 2
     with bus:
-        rp = Replayer(bus, args.file, args.speed, args.start, args.end, remap, args.what)
+        rp = Replayer(bus, args.file, args.speed, args.start, args.end, remap, args.what,
+                      answer_timeout=args.answer_timeout)
         signal.signal(signal.SIGINT, lambda *a: rp.stop_event.set())
         signal.signal(signal.SIGTERM, lambda *a: rp.stop_event.set())
         t0 = time.monotonic()
@@ -325,8 +374,9 @@ def main_args(args: argparse.Namespace) -> int:
             if not args.loop or rp.stop_event.is_set():
                 break
         time.sleep(0.5)  # let the last puts leave
-    print(f"sme replay: {rp.published} messages in {time.monotonic() - t0:.1f} s ({i} pass{'es' if i > 1 else ''})",
-          file=sys.stderr)
+    late = f"; {rp.unanswered} observations not answered in time" if rp.unanswered else ""
+    print(f"sme replay: {rp.published} messages in {time.monotonic() - t0:.1f} s ({i} pass{'es' if i > 1 else ''})"
+          f"{late}", file=sys.stderr)
     return 0
 
 
