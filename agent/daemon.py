@@ -211,7 +211,8 @@ class AgentDaemon:
             log.warning("world %s: no program: %s", wid, e)
             self.event(wid, "attach_failed", str(e))
             return
-        link = WorldLink(self.agent_id, spec, program, self.publish, make_detector(self.detector))
+        detector = make_detector(self.detector, **program.detector_params)
+        link = WorldLink(self.agent_id, spec, program, self.publish, detector)
         link.truth = truth
         if saved:
             link.version = saved["version"]

@@ -126,7 +126,8 @@ def replay_offline(path: str, seed: int | None = None, detector: str | None = No
             det = detector or c.get("detector", DEFAULT_DETECTOR)
             name = spec.program or spec.kind
             params = (program_params or {}).get(name, c.get("program_params", {}))
-            res.links[wid] = WorldLink(agent_id, spec, make_program(spec, s, **params), publisher, make_detector(det))
+            program = make_program(spec, s, **params)
+            res.links[wid] = WorldLink(agent_id, spec, program, publisher, make_detector(det, **program.detector_params))
         elif kind == "truth" and link is not None:
             try:
                 link.truth = codec.decode(Truth, rec.data)

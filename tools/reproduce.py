@@ -2,8 +2,10 @@
 
 Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and barrier, random policy),
 `retina` (ch. 4: saccade learning curves, lesion with the basic vs robust rule, reversal detected
-by the agent itself) and `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
-1-D depth map, on the PyBullet robot and on the Middlebury stereo pair). Runs go to worker processes (spawned); results are written to
+by the agent itself), `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
+1-D depth map, on the PyBullet robot and on the Middlebury stereo pair) and `mountaincar` (ch. 8:
+steps-to-goal curves of the staged program on three bodies, against true-state and random agents,
+and a baseline change while driving). Runs go to worker processes (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
 
@@ -94,6 +96,22 @@ def job_vergence(seed: int, world: str, iterations: int) -> dict:
             "success": [e.metrics["policy_success"] for e in embs], "first_perfect_iteration": first_perfect,
             "goal_minus_truth": (np.array(goals) - truth).tolist() if world == "stereo" else
             (np.array(goals) - truth / 0.01).tolist()}
+
+
+def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, morph_at: int | None = None) -> dict:
+    from tools.experiments import mountaincar as M
+
+    if kind == "true":
+        r = M.true_state(seed, train, every, n_eval)
+    elif kind == "random":
+        return {"kind": kind, "seed": seed, "curve": [(0, M.random_agent(seed, n_eval))]}
+    elif kind == "live":
+        r = M.visual(seed, train, every, n_eval, morph_at=morph_at, morph={"baseline": "1.4"}, detector="cusum")
+    else:
+        body = {"baseline-1.0": {}, "baseline-1.4": {"baseline": 1.4}, "vertical": {"vertical": True}}[kind]
+        r = M.visual(seed, train, every, n_eval, **body)
+    return {"kind": kind, "seed": seed, "curve": r.curve, "embeddings": r.embeddings, "drops": r.drops,
+            "morph_at": r.morph_at, "world_steps": r.world_steps, "seconds": r.seconds}
 
 
 def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
@@ -215,11 +233,82 @@ def vergence(runs: int, quick: bool, workers: int, out: str) -> dict:
     return {"results": res, "markdown": "\n".join(lines)}
 
 
-CHAPTERS = {"gridworld": gridworld, "retina": retina, "vergence": vergence}
+def _ci95(x: list[float]) -> tuple[float, float]:
+    from scipy import stats
+
+    a = np.asarray(x, dtype=np.float64)
+    if a.size < 2:
+        return float(a.mean()), 0.0
+    return float(a.mean()), float(stats.t.ppf(0.975, a.size - 1) * a.std(ddof=1) / np.sqrt(a.size))
+
+
+def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
+    train, every, n_eval = (30_000, 10_000, 20) if quick else (100_000, 10_000, 100)
+    morph_at = train
+    kinds = ("baseline-1.0", "baseline-1.4", "vertical", "true")
+    jobs = [(k, s, train, every, n_eval) for k in kinds for s in range(runs)]
+    jobs += [("live", s, 2 * train, every, n_eval, morph_at) for s in range(max(1, runs // 2))]
+    jobs += [("random", s, train, every, n_eval) for s in range(runs)]
+    res = _pool_map(job_mountaincar, jobs, workers)
+
+    def final(r: dict) -> float:  # the end of training: the mean of the last three evaluations
+        return float(np.mean([m for _, m in r["curve"][-3:]]))
+
+    finals = {k: [final(r) for r in res if r["kind"] == k] for k in kinds + ("random",)}
+    ci = {k: _ci95(v) for k, v in finals.items()}
+    from scipy import stats
+
+    lines = [f"Visual mountain car (ch. 8): {runs} seeded runs per body; {train} training car steps, evaluated every "
+             f"{every} on {n_eval} fixed random states (mean steps to goal, lower is better; 1000 = never).", "",
+             "| agent | steps to goal at the end (mean ± 95 % CI) | vs true state | dissertation |", "|---|---|---|---|"]
+    t = ci["true"][0]
+    for k, label in (("baseline-1.0", "sensorimotor features, baseline 1.0 m"), ("baseline-1.4", "same program, baseline 1.4 m"),
+                     ("vertical", "same program, vertical cameras"), ("true", "true position and velocity"),
+                     ("random", "random agent")):
+        ref = {"true": "ideal", "random": "benchmark"}.get(k, "comparable to true state")
+        lines.append(f"| {label} | {_fmt(ci[k], 1)} | {ci[k][0] / t:.2f}x | {ref} |")
+    pairs = [("baseline-1.0", "baseline-1.4"), ("baseline-1.0", "vertical"), ("baseline-1.4", "vertical")]
+    tests = {f"{a} vs {b}": float(stats.ttest_ind(finals[a], finals[b], equal_var=False).pvalue)
+             if len(finals[a]) > 1 and len(finals[b]) > 1 else float("nan") for a, b in pairs}
+    lines += ["", "Bodies compared (Welch t-test p, no significant difference when > 0.05): " +
+              ", ".join(f"{k}: p = {p:.2f}" for k, p in tests.items())]
+    live = []
+    for r in (r for r in res if r["kind"] == "live"):
+        pre = [m for s, m in r["curve"] if s <= r["morph_at"]][-2:]
+        before = float(np.mean(pre)) if pre else float("nan")
+        drops = [d for d in r["drops"] if d >= r["morph_at"]]
+        relearned = [e for e in r["embeddings"] if e["trigger"].startswith("relearned")]
+        back = next((s for s, m in r["curve"] if s > r["morph_at"] and relearned and s >= relearned[0]["training_steps"]
+                     and m <= 1.2 * before), None)
+        live.append({"seed": r["seed"], "before": before, "detected_after": (drops[0] - r["morph_at"]) if drops else None,
+                     "relearned_embedding": bool(relearned), "recovered_after": (back - r["morph_at"]) if back else None,
+                     "after": [m for s, m in r["curve"] if s > r["morph_at"]]})
+    lines += ["", f"Live body change, baseline 1.0 → 1.4 m after {morph_at} training steps (per run): "]
+    for lv in live:
+        lines.append(f"- seed {lv['seed']}: before {lv['before']:.1f} steps to goal; drop detected "
+                     f"{lv['detected_after']} training steps after the change; new embedding: {lv['relearned_embedding']}; "
+                     f"back within 20 % after {lv['recovered_after']} training steps; evaluations after: "
+                     f"{[round(m, 1) for m in lv['after']]}")
+    series = []
+    for k in kinds:
+        rs = [r for r in res if r["kind"] == k]
+        xs = [s for s, _ in rs[0]["curve"]]
+        series.append((k, xs, np.mean([[m for _, m in r["curve"]][: len(xs)] for r in rs], axis=0)))
+    series.append(("random", [series[0][1][0], series[0][1][-1]], [ci["random"][0]] * 2))
+    _plot(out, "mountaincar_learning.png", "Mean steps to goal (Fig 8.2, 8.4)", "training car steps", "steps to goal",
+          series, logy=True)
+    if live:
+        _plot(out, "mountaincar_live_morph.png", "Baseline 1.0 → 1.4 m while driving", "training car steps",
+              "steps to goal", [(f"seed {r['seed']}", [s for s, _ in r["curve"]], [m for _, m in r["curve"]])
+                                for r in res if r["kind"] == "live"], logy=True, vline=morph_at)
+    return {"results": res, "finals": finals, "ci95": ci, "welch_p": tests, "live": live, "markdown": "\n".join(lines)}
+
+
+CHAPTERS = {"gridworld": gridworld, "retina": retina, "vergence": vergence, "mountaincar": mountaincar}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("reproduce", help="rerun a dissertation experiment (gridworld, retina, vergence)",
+    p = sub.add_parser("reproduce", help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar)",
                        description=__doc__)
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")
     p.add_argument("--runs", type=int, default=10, help="seeded runs per condition (default 10)")

@@ -39,3 +39,12 @@ def step(x: float, v: float, a: int, prm: MountainCarParams = MountainCarParams(
 
 def random_state(rng: np.random.Generator, prm: MountainCarParams = MountainCarParams()) -> tuple[float, float]:
     return float(rng.uniform(prm.x_min, prm.goal)), float(rng.uniform(-prm.v_max, prm.v_max))
+
+
+EVAL_SEED = 8_2026
+
+
+def evaluation_states(n: int, eval_seed: int = EVAL_SEED, prm: MountainCarParams = MountainCarParams()) -> np.ndarray:
+    """[n, 2] fixed random (x, v) states: every world and every agent is evaluated on the same ones."""
+    rng = np.random.default_rng(eval_seed)
+    return np.array([random_state(rng, prm) for _ in range(n)], dtype=np.float64).reshape(-1, 2)

@@ -29,6 +29,12 @@ def _vergence(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
     return VergenceWorld.from_params(world_id, seed, params)
 
 
+def _mountaincar(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
+    from worlds.mountaincar import MountainCarWorld
+
+    return MountainCarWorld.from_params(world_id, seed, params)
+
+
 def _stereo(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
     from worlds.stereo_pair import StereoPairWorld
 
@@ -47,6 +53,7 @@ WORLDS: dict[str, Callable[[str, int, Mapping[str, Any]], World]] = {
     "retina": _retina,
     "vergence": _vergence,
     "stereo": _stereo,
+    "mountaincar": _mountaincar,
     "bench": _bench,
 }
 

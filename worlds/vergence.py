@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+import tempfile
 from typing import Any, Mapping
 
 import numpy as np
@@ -36,6 +37,20 @@ def verge(k: int, action: np.ndarray, k_max: int) -> int:
     return min(k + 1, k_max) if a == CONVERGE else max(k - 1, 0)
 
 
+def noise_texture(path: str, size: int, seed: int, sigmas: tuple[float, ...], tint: tuple[float, float, float]) -> None:
+    """Write a square PNG of smooth noise (Gaussian-filtered, one octave per sigma in texels), tinted."""
+    from matplotlib.image import imsave
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(seed)
+    img = np.zeros((size, size))
+    for sigma in sigmas:
+        n = gaussian_filter(rng.standard_normal((size, size)), sigma, mode="wrap")
+        img += n / n.std()
+    img = (img - img.min()) / (img.max() - img.min())
+    imsave(path, np.clip(img[..., None] * np.asarray(tint)[None, None, :], 0.0, 1.0))
+
+
 def foveal_difference(left: np.ndarray, right: np.ndarray) -> float:
     """d(r, l) of Eq 7.2, as a mean over the fovea."""
     return float(np.abs(np.asarray(left, np.float64) - np.asarray(right, np.float64)).mean())
@@ -46,8 +61,11 @@ class VergenceWorld(World):
 
     def __init__(self, world_id: str = "vergence", seed: int = 0, baseline: float = 0.5, sign_distance: float = 3.0,
                  n_starts: int = 20, nearest: float = 0.8, step_rad: float = 0.01, fovea: int = 16,
-                 fovea_deg: float = 12.0, max_steps: int = 40, vertical: bool = False) -> None:
+                 fovea_deg: float = 12.0, max_steps: int = 40, vertical: bool = False, sign_radius: float = 0.375,
+                 room: bool = False) -> None:
         super().__init__(world_id, seed)
+        self.sign_radius, self.room = sign_radius, room
+        self._body0 = (baseline, vertical)
         if baseline <= 0 or not 0 < nearest < sign_distance or n_starts < 2:
             raise ValueError("baseline > 0, 0 < nearest < sign_distance and n_starts >= 2 are required")
         self.baseline, self.sign_distance, self.step_rad = baseline, sign_distance, step_rad
@@ -74,8 +92,8 @@ class VergenceWorld(World):
 
     def _build(self) -> None:
         c = self._c
-        # a red octagon (the stop sign) 0.75 m across on a pole, textured so the fovea sees structure
-        r = 0.375
+        # a red octagon (the stop sign), 0.75 m across by default, textured so the fovea sees structure
+        r = self.sign_radius
         ang = np.pi / 8 + np.arange(8) * np.pi / 4
         ring = np.c_[np.zeros(8), r * np.cos(ang), r * np.sin(ang)]
         verts = np.vstack([[0.0, 0.0, 0.0], ring]).tolist()
@@ -86,6 +104,9 @@ class VergenceWorld(World):
         vis = c.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx + idx[::-1], uvs=uvs,
                                   rgbaColor=[1.0, 0.25, 0.2, 1.0])
         self._sign = c.createMultiBody(0, baseVisualShapeIndex=vis, basePosition=[self.sign_distance, 0, 1.2])
+        if self.room:
+            self._build_room(vis)
+            return
         tex = c.loadTexture(os.path.join(pybullet_data.getDataPath(), "tex256.png"))
         c.changeVisualShape(self._sign, -1, textureUniqueId=tex)
         pole = c.createVisualShape(p.GEOM_BOX, halfExtents=[0.02, 0.02, 0.6], rgbaColor=[0.6, 0.6, 0.6, 1])
@@ -95,6 +116,24 @@ class VergenceWorld(World):
         wall = c.createMultiBody(0, baseVisualShapeIndex=back, basePosition=[self.sign_distance + 4.0, 0, 1.2])
         c.changeVisualShape(wall, -1, textureUniqueId=c.loadTexture(os.path.join(pybullet_data.getDataPath(),
                                                                                   "checker_grid.jpg")))
+
+    def _build_room(self, sign_visual: int) -> None:
+        """Smooth-noise textures on the sign and on a closed room around the track. With eyes a metre
+        apart, parallel or crossed gazes otherwise land on blank sky or a uniform patch, where d is 0
+        and the minimum of Eq 7.2 is not on the sign any more."""
+        c = self._c
+        with tempfile.TemporaryDirectory() as tmp:
+            sign_png, room_png = os.path.join(tmp, "sign.png"), os.path.join(tmp, "room.png")
+            noise_texture(sign_png, 256, 1, (2.0, 6.0), (1.0, 0.3, 0.25))
+            noise_texture(room_png, 512, 2, (1.5, 4.0), (0.6, 0.8, 0.6))
+            c.changeVisualShape(self._sign, -1, rgbaColor=[1, 1, 1, 1], textureUniqueId=c.loadTexture(sign_png))
+            tex = c.loadTexture(room_png)
+        s = self.sign_distance
+        walls = [([0.01, 12, 12], [s + 6, 0, 1.2]), ([0.01, 12, 12], [s - 12, 0, 1.2]), ([12, 0.01, 12], [s - 3, 8, 1.2]),
+                 ([12, 0.01, 12], [s - 3, -8, 1.2]), ([12, 12, 0.01], [s - 3, 0, -0.01]), ([12, 12, 0.01], [s - 3, 0, 8])]
+        for half, pos in walls:
+            shape = c.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[1, 1, 1, 1])
+            c.changeVisualShape(c.createMultiBody(0, baseVisualShapeIndex=shape, basePosition=pos), -1, textureUniqueId=tex)
 
     # geometry ----------------------------------------------------------------------------------
     def _eyes(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -180,9 +219,9 @@ class VergenceWorld(World):
             self._goal_cache.clear()
             return f"morph: baseline {self.baseline} m, cameras {'vertical' if self.vertical else 'horizontal'}"
         if control.kind == "heal":
-            self.baseline, self.vertical = 0.5, False
+            self.baseline, self.vertical = self._body0
             self._goal_cache.clear()
-            return "heal: baseline 0.5 m, horizontal cameras"
+            return f"heal: baseline {self.baseline} m, cameras {'vertical' if self.vertical else 'horizontal'}"
         raise PerturbationError(f"vergence has no perturbation {control.kind!r}; use morph or heal")
 
     def truth(self) -> Truth:

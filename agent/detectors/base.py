@@ -44,15 +44,16 @@ class RunningMoments:
     """Mean and variance of the reference (pre-drop) regime: exact (Welford) for the first `warmup`
     samples, then exponentially weighted with rate `rate` so slow improvements are followed.
 
-    Samples join the reference `lag` steps late (`push`): a drop is detected long before its
+    Samples join the reference `lag` steps late (default: half the warmup, at most 50) (`push`): a drop is detected long before its
     samples would enter, and, unlike updating only while no drop is suspected, no selection bias
     creeps into the mean and variance."""
 
-    def __init__(self, warmup: int = 100, rate: float = 0.002, lag: int = 50) -> None:
+    def __init__(self, warmup: int = 100, rate: float = 0.002, lag: int | None = None) -> None:
         if warmup < 2:
             raise ValueError("warmup must be >= 2")
         if not 0 < rate < 1:
             raise ValueError("rate must be in (0, 1)")
+        lag = min(50, warmup // 2) if lag is None else lag
         if lag < 0:
             raise ValueError("lag must be >= 0")
         self.warmup = warmup

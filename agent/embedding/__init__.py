@@ -2,7 +2,9 @@
 
 from agent.embedding.classical_mds import MDSModel, MDSResult, classical_mds, double_centre
 from agent.embedding.landmark_mds import LandmarkResult, landmark_mds, landmark_trace_embedding, maxmin_landmarks
-from agent.embedding.procrustes import ProcrustesResult, procrustes, procrustes_error
+from agent.embedding.procrustes import (
+    ProcrustesResult, SimilarityTransform, fit_similarity, procrustes, procrustes_error,
+)
 from agent.embedding.trace_distances import (
     PreparedTraces, continuous_trace_distances, edit_trace_distances, pad_traces, trace_cross_distances, trace_distances,
     update_trace_distances,
@@ -10,7 +12,7 @@ from agent.embedding.trace_distances import (
 
 __all__ = [
     "MDSModel", "MDSResult", "classical_mds", "double_centre", "LandmarkResult", "landmark_mds",
-    "landmark_trace_embedding", "maxmin_landmarks", "ProcrustesResult", "procrustes", "procrustes_error",
+    "landmark_trace_embedding", "maxmin_landmarks", "ProcrustesResult", "SimilarityTransform", "fit_similarity", "procrustes", "procrustes_error",
     "PreparedTraces", "continuous_trace_distances", "edit_trace_distances", "pad_traces", "trace_cross_distances", "trace_distances",
     "update_trace_distances",
 ]

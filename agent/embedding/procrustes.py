@@ -47,3 +47,36 @@ def procrustes(truth: np.ndarray, embedding: np.ndarray) -> ProcrustesResult:
 
 def procrustes_error(truth: np.ndarray, embedding: np.ndarray) -> float:
     return procrustes(truth, embedding).disparity
+
+
+@dataclass(frozen=True)
+class SimilarityTransform:
+    """x -> scale * x @ rotation + translation."""
+
+    scale: float
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    def apply(self, X: np.ndarray) -> np.ndarray:
+        return self.scale * np.asarray(X, dtype=np.float64) @ self.rotation + self.translation
+
+
+def fit_similarity(target: np.ndarray, source: np.ndarray) -> SimilarityTransform:
+    """The similarity transform (scale, rotation or reflection, translation) mapping the rows of
+    `source` onto the corresponding rows of `target` with least squared error: how a new embedding
+    is put in the coordinates of an older one of the same start states."""
+    A = np.asarray(target, dtype=np.float64)
+    B = np.asarray(source, dtype=np.float64)
+    A = A.reshape(-1, 1) if A.ndim == 1 else A
+    B = B.reshape(-1, 1) if B.ndim == 1 else B
+    if A.shape != B.shape or A.shape[0] < 2:
+        raise ValueError(f"need two equal shapes with >= 2 rows, got {A.shape} and {B.shape}")
+    mu_a, mu_b = A.mean(axis=0), B.mean(axis=0)
+    A0, B0 = A - mu_a, B - mu_b
+    norm = float(np.square(B0).sum())
+    if norm == 0:
+        raise ValueError("source has all points identical")
+    U, s, Vt = np.linalg.svd(B0.T @ A0)
+    R = U @ Vt
+    scale = float(s.sum() / norm)
+    return SimilarityTransform(scale, R, mu_a - scale * mu_b @ R)

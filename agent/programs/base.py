@@ -48,6 +48,9 @@ class EventOutput:
 
 class Program(abc.ABC):
     name = "program"
+    # settings for the daemon's drop detector that suit this program's `performance` stream, e.g. a
+    # shorter warm-up for one value per episode than for one per step
+    detector_params: dict[str, Any] = {}
 
     def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
         self.spec = spec

@@ -26,10 +26,17 @@ def _vergence(spec: WorldSpec, seed: int, **kw: Any) -> Program:
     return VergenceProgram(spec, seed, **kw)
 
 
+def _mountaincar(spec: WorldSpec, seed: int, **kw: Any) -> Program:
+    from agent.programs.mountaincar import MountainCarProgram
+
+    return MountainCarProgram(spec, seed, **kw)
+
+
 PROGRAMS: dict[str, Callable[..., Program]] = {
     "vergence": _vergence,
     "gridworld": _gridworld,
     "retina": _retina,
+    "mountaincar": _mountaincar,
     "echo": lambda spec, seed, **kw: EchoProgram(spec, seed),
 }
 

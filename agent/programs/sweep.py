@@ -31,7 +31,7 @@ class StartStateSweep:
         if obs.t == 0 and obs.start != self._start:
             return Decision(reset=True, start=self._start)  # e.g. the world restarted mid-episode
         if obs.done or len(self._trace) >= self.max_trace or (stop is not None and stop(obs, self._trace)):
-            self.rewarded += int(obs.done and (obs.reward > 0 or not self._trace))
+            self.rewarded += int(obs.reward > 0 or (obs.done and not self._trace))
             self.traces.append(self._trace)
             self._trace = []
             self._start += 1

@@ -1,0 +1,313 @@
+"""The visual mountain car, staged as ch. 8: geometry first, then control on top of it.
+
+Stage 1, depth from vergence (ch. 7): LSPI over RBF features of the foveated difference learns to
+verge (converge/diverge until the perceptual reward); after each LSPI iteration the greedy policy
+runs from the n_positions sweep states; once it fixates from all of them, the vergence traces are
+embedded in 1-D by classical MDS (indel edit distance, Eq 7.3) and published. The MDS model then
+places any new trace without re-embedding: that coordinate is the agent's position.
+
+Stage 2, driving: every car step starts with the eyes parallel; the agent verges (greedy), reads its
+position from the trace, a constant-velocity Kalman filter (filterpy) over that position gives
+velocity, and Sarsa(lambda) with tile coding (alpha 0.3, gamma 0.99, lambda 0.9) picks reverse,
+coast or forward (reward -1 per car step). Every `eval_every` training car steps, learning halts
+and the greedy policy is run from the world's fixed evaluation states: the mean steps to goal is
+published as an `evaluation` event (the learning curve).
+
+The body changes: after `watch_after` training steps, each training episode reports how it went
+against what the agent expected, log(expected steps / actual steps), with the expectation read off
+Sarsa's own value at the episode's start (Q = -(1 - gamma^T) / (1 - gamma)). A new camera
+baseline makes every trace longer, positions shift, episodes run long: the daemon's detector sees
+the drop and calls `on_drop`, and the program relearns its vergence policy and re-embeds. The new
+embedding is put in the old one's coordinates by a similarity fit over the same start states
+(the agent revisits the same places), so what Sarsa learned on top stays valid.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from agent.embedding import classical_mds, fit_similarity, trace_cross_distances, trace_distances
+from agent.embedding.procrustes import SimilarityTransform
+from agent.learners.kalman_velocity import VelocityFilter
+from agent.learners.lspi import LSPI, RBFBasis
+from agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from agent.programs.sweep import StartStateSweep
+from agent.programs.vergence import foveal_difference
+from protocol.errors import SpecMismatch
+from protocol.messages import Observation, WorldSpec
+
+CONVERGE, DIVERGE, REVERSE = 0, 1, 2
+
+
+class MountainCarProgram(Program):
+    name = "mountaincar"
+    detector_params = {"warmup": 20}  # one value per training episode
+
+    def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 400, epsilon: float = 0.2,
+                 vergence_gamma: float = 0.95, ridge: float = 1e-3, max_trace: int = 80,
+                 alpha: float = 0.3, gamma: float = 0.99, lam: float = 0.9, tiles: int = 10, n_tilings: int = 8,
+                 drive_epsilon: float = 0.0, eval_every: int = 10_000, n_eval: int | None = None,
+                 watch_after: int = 50_000, process_var: float = 1e-5) -> None:
+        super().__init__(spec, seed)
+        if not spec.action_space.discrete or spec.action_space.n != 5:
+            raise SpecMismatch("mountaincar program needs 5 discrete actions (converge, diverge, reverse, coast, forward)")
+        spec.sensor("left"), spec.sensor("right")
+        try:
+            self.n_positions = int(spec.params.get("n_positions", "0"))
+            world_evals = int(spec.params.get("n_eval", "0"))
+        except ValueError as e:
+            raise SpecMismatch(f"mountaincar spec params n_positions/n_eval must be integers: {e}") from None
+        if self.n_positions < 2 or self.n_positions + world_evals > spec.n_starts:
+            raise SpecMismatch("mountaincar spec needs n_positions >= 2 sweep states and n_eval evaluation states")
+        self.n_eval = world_evals if n_eval is None else min(n_eval, world_evals)
+        if eval_every < 1 or max_trace < 2 or samples_per_iteration < 1:
+            raise ValueError("eval_every, max_trace and samples_per_iteration must be positive")
+        self.samples_per_iteration, self.epsilon, self.max_trace = samples_per_iteration, epsilon, max_trace
+        self.eval_every, self.watch_after, self.process_var = eval_every, watch_after, process_var
+        self.lspi = LSPI(RBFBasis(tuple(float(c) for c in np.linspace(0.0, 0.3, 13)), 0.025, 2),
+                         gamma=vergence_gamma, ridge=ridge)
+        self._sarsa_args = dict(alpha=alpha, gamma=gamma, lam=lam, tiles=tiles, n_tilings=n_tilings,
+                                epsilon=drive_epsilon)
+        self.sarsa: SarsaLambda | None = None
+        self.phase = "explore"
+        self.new_samples = 0
+        self._prev: tuple[float, int] | None = None
+        self._explore_len = 0
+        self._sweep = StartStateSweep(self.n_positions, max_trace)
+        # the embedding: landmark traces, MDS model, alignment to the first embedding
+        self.landmarks: list[list[int]] = []
+        self._model = None
+        self._align: SimilarityTransform | None = None
+        self._coords0: np.ndarray | None = None
+        self._positions: dict[tuple[int, ...], float] = {}
+        self._verge: dict[float, int] = {}  # the greedy vergence action per foveal difference, while LSPI is fixed
+        self.quantum = 1.0
+        # driving
+        self.training_steps = 0
+        self.episodes = 0
+        self._kf: VelocityFilter | None = None
+        self._trace: list[int] | None = None  # the vergence trace being read, None between readings
+        self._last_drive = False
+        self._s: np.ndarray | None = None
+        self._a = 0
+        self._ep_steps = 0
+        self._expected: float | None = None
+        self._perf: float | None = None
+        self._eval_i = 0
+        self._eval_steps: list[int] = []
+        self.curve: list[tuple[int, float]] = []
+        self.episode_log: list[tuple[int, int, float | None]] = []  # (training steps at end, car steps, expected)
+        self.relearn_at: int | None = None
+
+    # stage 1: vergence ---------------------------------------------------------------------------
+    def _explore(self, obs: Observation, d: float) -> Decision:
+        if self._prev is not None and obs.t > 0:
+            self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, obs.reward > 0)
+            self.new_samples += 1
+        self._prev = None
+        if self.new_samples >= self.samples_per_iteration:
+            self.new_samples = 0
+            change = self.lspi.iterate()
+            self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}", obs.step,
+                                  {"weight_change": change}))
+            self.phase = "sweep"
+            self._sweep = StartStateSweep(self.n_positions, self.max_trace)
+            return self._sweep.begin()
+        if obs.reward > 0 or obs.done or self._explore_len >= self.max_trace:
+            self._explore_len = 0
+            return Decision(reset=True, start=-1)
+        a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
+        self._prev = (d, a)
+        self._explore_len += 1
+        return Decision((float(a),))
+
+    def _sweeping(self, obs: Observation) -> Decision:
+        dec = self._sweep.step(obs, lambda o, tr: self.lspi.greedy(foveal_difference(o)),
+                               stop=lambda o, tr: o.reward > 0)
+        if not self._sweep.finished:
+            return dec
+        if self._sweep.rewarded < self.n_positions:
+            self.phase = "explore"  # not yet fixating from everywhere: more samples, another iteration
+            return dec
+        self._embed(obs.step)
+        self.phase = "drive"
+        self._start_training_episode()
+        return Decision(reset=True, start=-1)
+
+    def _embed(self, step: int) -> None:
+        traces = [list(t) for t in self._sweep.traces]
+        D = trace_distances(traces, kind="edit", substitution_cost=2)
+        mds = classical_mds(D, 1)
+        coords = mds.coordinates
+        relearned = self._coords0 is not None
+        if relearned:
+            # the same start states as the first embedding: keep the coordinates Sarsa learned in
+            self._align = fit_similarity(self._coords0, coords)
+            coords = self._align.apply(coords)
+        else:
+            self._align = None
+            self._coords0 = coords.copy()
+            lengths = [len(t) for t in traces]
+            span = float(coords.max() - coords.min())
+            self.quantum = span / max(max(lengths) - min(lengths), 1)  # one vergence step, in coordinates
+            self._make_driver(float(coords.min()), float(coords.max()))
+        self.landmarks, self._model, self._positions, self._verge = traces, mds.model, {}, {}
+        n = len(traces)
+        trigger = (f"relearned after drop at step {self.relearn_at}" if relearned
+                   else f"policy_iteration {self.lspi.iterations}")
+        self.emit(EmbeddingOutput(
+            trigger, tuple(range(n)), coords, tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
+            {"lspi_iterations": float(self.lspi.iterations), "mean_trace_length": float(np.mean([len(t) for t in traces]))}))
+
+    def position(self, trace: list[int]) -> float:
+        """The agent's position: the embedding coordinate of a vergence trace (out of sample)."""
+        key = tuple(trace)
+        p = self._positions.get(key)
+        if p is None:
+            d = trace_cross_distances([list(trace)], self.landmarks, kind="edit", substitution_cost=2)
+            y = self._model.transform(d)
+            if self._align is not None:
+                y = self._align.apply(y)
+            p = self._positions[key] = float(y[0, 0])
+        return p
+
+    # stage 2: driving ----------------------------------------------------------------------------
+    def _make_driver(self, lo: float, hi: float) -> None:
+        a = self._sarsa_args
+        margin = 0.1 * (hi - lo)
+        vmax = 0.04 * (hi - lo)  # the car crosses its track in no fewer than ~25 steps
+        coder = TileCoder([lo - margin, -vmax], [hi + margin, vmax], tiles=a["tiles"], n_tilings=a["n_tilings"])
+        self.sarsa = SarsaLambda(coder, 3, alpha=a["alpha"], gamma=a["gamma"], lam=a["lam"], epsilon=a["epsilon"],
+                                 seed=int(self.rng.integers(2**31)))
+        self._kf = VelocityFilter(measurement_var=self.quantum ** 2 / 12, process_var=self.process_var * self.quantum ** 2)
+
+    @property
+    def evaluating(self) -> bool:
+        return self.phase == "evaluate"
+
+    def _start_training_episode(self) -> None:
+        self._trace, self._last_drive, self._s, self._ep_steps, self._expected = None, False, None, 0, None
+
+    def _expected_steps(self, s: np.ndarray, a: int) -> float:
+        g = self.sarsa.gamma
+        q = float(self.sarsa.q(s)[a])
+        inner = 1.0 + (1.0 - g) * q
+        return math.log(inner) / math.log(g) if 0.0 < inner < 1.0 and 0 < g < 1 else (0.0 if inner >= 1.0 else 1e4)
+
+    def _drive(self, obs: Observation) -> Decision:
+        if obs.t == 0:
+            self._trace, self._s, self._ep_steps, self._last_drive = [], None, 0, False
+        elif self._last_drive:
+            self._last_drive = False
+            if obs.done:
+                return self._episode_over(obs)
+            self._trace = []
+        if self._trace is None:
+            self._trace = []
+        if not (obs.reward > 0 and self._trace) and len(self._trace) < self.max_trace and not (obs.t > 0 and obs.done):
+            d = foveal_difference(obs)
+            a = self._verge.get(d)
+            if a is None:
+                a = self._verge[d] = self.lspi.greedy(d)
+            self._trace.append(a)
+            return Decision((float(a),))
+        if obs.done:  # the world ended the episode while we were reading (its car-step limit)
+            return self._episode_over(obs)
+        p = self.position(self._trace)
+        self._trace = None
+        if self._s is None:
+            self._kf.reset(p)
+        pos, vel = self._kf.update(p)
+        s = np.array([pos, vel])
+        sarsa = self.sarsa
+        if self.evaluating:
+            q = sarsa.q(s)
+            a = int(np.flatnonzero(q == q.max())[0])
+        else:
+            a = sarsa.act(s)
+            if self._s is None:
+                sarsa.begin_episode()
+                if self.training_steps >= self.watch_after:
+                    self._expected = self._expected_steps(s, a)
+            else:
+                sarsa.learn_one(self._s, self._a, -1.0, s, a)
+        self._s, self._a = s, a
+        self._ep_steps += 1
+        self._last_drive = True
+        if not self.evaluating:
+            self.training_steps += 1
+        return Decision((float(REVERSE + a),))
+
+    def _episode_over(self, obs: Observation) -> Decision:
+        reached = obs.reward > 0
+        if self.evaluating:
+            self._eval_steps.append(self._ep_steps)
+            self._eval_i += 1
+            if self._eval_i < self.n_eval:
+                return self._eval_reset()
+            mean = float(np.mean(self._eval_steps))
+            self.curve.append((self.training_steps, mean))
+            failed = int(sum(not r for r in self._eval_reached))
+            self.emit(EventOutput("evaluation", f"mean steps to goal {mean:.1f} from {self.n_eval} states after "
+                                  f"{self.training_steps} training steps", obs.step,
+                                  {"steps_to_goal": mean, "training_steps": float(self.training_steps),
+                                   "failures": float(failed)}))
+            self.phase = "drive"
+            self._start_training_episode()
+            return Decision(reset=True, start=-1)
+        if reached and self._s is not None:
+            self.sarsa.learn_one(self._s, self._a, -1.0, self._s, None)
+        self.episodes += 1
+        self.episode_log.append((self.training_steps, self._ep_steps, self._expected))
+        if self._expected is not None and self._ep_steps > 0:
+            self._perf = math.log((self._expected + 1.0) / (self._ep_steps + 1.0))
+        self._start_training_episode()
+        if self.n_eval and self.training_steps // self.eval_every > len(self.curve):
+            return self._begin_evaluation()
+        return Decision(reset=True, start=-1)
+
+    def _begin_evaluation(self) -> Decision:
+        self.phase = "evaluate"
+        self._eval_i, self._eval_steps, self._eval_reached = 0, [], []
+        return self._eval_reset()
+
+    def _eval_reset(self) -> Decision:
+        self._start_training_episode()
+        return Decision(reset=True, start=self.n_positions + self._eval_i)
+
+    # Program interface ---------------------------------------------------------------------------
+    def act(self, obs: Observation) -> Decision:
+        if self.phase == "explore":
+            return self._explore(obs, foveal_difference(obs))
+        if self.phase == "sweep":
+            return self._sweeping(obs)
+        if self.evaluating and obs.t > 0 and self._last_drive and obs.done:
+            self._eval_reached.append(obs.reward > 0)
+        return self._drive(obs)
+
+    def performance(self, obs: Observation) -> float | None:
+        out, self._perf = self._perf, None
+        return out
+
+    def on_drop(self, step: int) -> None:
+        """The body changed: relearn vergence (LSPI from scratch) and re-embed; Sarsa is kept."""
+        if self.phase not in ("drive", "evaluate"):
+            return
+        self.relearn_at = step
+        self.lspi.reset()
+        self._verge = {}
+        self.phase, self.new_samples, self._prev, self._explore_len = "explore", 0, None, 0
+        self.emit(EventOutput("relearning", "vergence policy relearned from scratch, then re-embedded", step))
+
+    def world_restarted(self) -> None:
+        self._prev = None
+        self._sweep.interrupted()
+        self._start_training_episode()
+
+    def summary(self) -> dict[str, Any]:
+        return {"phase": self.phase, "training_steps": self.training_steps, "episodes": self.episodes,
+                "curve": list(self.curve)}
