@@ -17,7 +17,8 @@ KINDS = {
     "reverse": "retina: swap up/down motor commands (again to restore)",
     "noise": "retina: additive sensor noise, --param sd=0.05",
     "heal": "undo every perturbation",
-    "morph": "mountain car/vergence: change the body, e.g. --param baseline=1.4 or --param vertical=true",
+    "morph": "mountain car/vergence: change the body, e.g. --baseline 1.4 or --vertical (same as --param "
+             "baseline=1.4, --param vertical=true)",
 }
 
 
@@ -29,6 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("kind", help="perturbation kind: " + ", ".join(KINDS))
     p.add_argument("--world", required=True, help="id of the running world")
     p.add_argument("--param", action="append", metavar="K=V", help="perturbation parameter, repeatable")
+    p.add_argument("--baseline", type=float, default=None, metavar="M", help="morph: camera baseline in metres")
+    p.add_argument("--vertical", action=argparse.BooleanOptionalAction, default=None,
+                   help="morph: cameras one above the other (--no-vertical: side by side)")
     add_bus_arguments(p, "tool")
     p.set_defaults(func=main_args)
 
@@ -39,7 +43,19 @@ def main_args(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"sme perturb: {e}", file=sys.stderr)
         return 2
-    ctl = Control(args.world, args.kind, parse_params(args.param), time.time_ns() & 0xFFFFFFFF, time.time())
+    params = parse_params(args.param)
+    if args.baseline is not None or args.vertical is not None:
+        if args.kind != "morph":
+            print("sme perturb: --baseline and --vertical belong to morph", file=sys.stderr)
+            return 2
+        if args.baseline is not None:
+            if not args.baseline > 0:
+                print("sme perturb: --baseline must be > 0", file=sys.stderr)
+                return 2
+            params["baseline"] = str(args.baseline)
+        if args.vertical is not None:
+            params["vertical"] = str(args.vertical).lower()
+    ctl = Control(args.world, args.kind, params, time.time_ns() & 0xFFFFFFFF, time.time())
     try:
         with Bus(bus_config_from_args(args, "tool")) as bus:
             if not bus.alive(keys.alive_world(args.world), timeout=2.0):

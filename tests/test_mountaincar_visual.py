@@ -1,0 +1,142 @@
+"""The visual mountain car (ch. 8): the camera-only world, its bodies, the staged program in
+process (shortened), the body changed while it drives, and the whole thing over the bus."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from agent.programs.mountaincar import MountainCarProgram
+from protocol.messages import Control
+from tests.conftest import wait_for
+from tools.inprocess import run_inprocess
+from worlds.mountaincar import COAST, CONVERGE, FORWARD, MountainCarWorld
+from worlds.mountaincar_dynamics import evaluation_states, step as car_step
+
+
+@pytest.fixture(scope="module")
+def world():
+    w = MountainCarWorld(n_eval=10)
+    yield w
+    w.close()
+
+
+def fixate(world) -> int:
+    for k in range(world.max_episode_steps):
+        r = world.step(np.array([CONVERGE]))
+        if r.reward > 0:
+            return k + 1
+    raise AssertionError("never fixated")
+
+
+def test_observations_are_the_two_foveae_only_and_driving_follows_eq_8_1(world):
+    r = world.reset(start=3)
+    assert set(r.tensors) == {"left", "right"} and r.tensors["left"].shape == (16, 16)
+    x0, v0 = world.x, world.v
+    world.step(np.array([CONVERGE]))
+    assert (world.x, world.v) == (x0, v0) and world.k == 1  # the vergence motor does not move the car
+    r = world.step(np.array([FORWARD]))
+    assert (world.x, world.v) == car_step(x0, v0, 1)[:2] and world.k == 0  # eyes back to parallel
+    with pytest.raises(ValueError):
+        world.step(np.array([7]))
+    assert np.array_equal(world.starts[world.n_positions:], evaluation_states(10))
+
+
+@pytest.mark.parametrize("body", [{}, {"baseline": "1.4"}, {"vertical": "true"}])
+def test_perceptual_goal_is_where_the_eyes_fixate_the_sign(world, body):
+    world.perturb(Control(world.world_id, "morph", body))
+    try:
+        for start in (0, 7, 13, 19):
+            world.reset(start=start)
+            k = fixate(world)
+            geometric = float(world.true_angle(world.z)) / world.step_rad
+            assert abs(k - geometric) <= 1.0, (body, start, k, geometric)
+    finally:
+        world.perturb(Control(world.world_id, "heal"))
+    assert world.baseline == 1.0 and not world.vertical
+
+
+def test_a_wider_baseline_lengthens_every_trace_and_the_goal_ends_the_episode(world):
+    world.reset(start=10)
+    before = fixate(world)
+    world.perturb(Control(world.world_id, "morph", {"baseline": "1.4"}))
+    world.reset(start=10)
+    after = fixate(world)
+    world.perturb(Control(world.world_id, "heal"))
+    assert after > before * 1.25
+    world.reset(start=0)
+    world.x, world.v = 1.89, 0.05
+    r = world.step(np.array([FORWARD]))
+    assert r.done and r.reward == 1.0
+    w = MountainCarWorld(n_eval=1, max_car_steps=3)
+    try:
+        w.reset(start=0)
+        dones = [w.step(np.array([COAST])).done for _ in range(3)]
+        assert dones == [False, False, True]  # the car-step limit ends an episode, vergence steps do not count
+    finally:
+        w.close()
+
+
+def drive(world, prog, until, steps=3_000_000, **kw):
+    out = []
+    run = run_inprocess(world, prog, steps, on_output=out.append, stop_when=lambda r: until(prog), **kw)
+    return run, out
+
+
+def test_staged_program_embeds_position_then_learns_to_drive():
+    w = MountainCarWorld(n_eval=10)
+    prog = MountainCarProgram(w.spec(), seed=0, eval_every=6000)
+    with w:
+        run, out = drive(w, prog, lambda p: len(p.curve) >= 3)
+    emb = run.embeddings[0]
+    assert emb.procrustes_error < 0.01 and len(emb.ids) == w.n_positions  # 1-D position vs the true vergence angle
+    curve = [m for _, m in prog.curve]
+    assert curve[0] > 500 and curve[-1] < 0.6 * curve[0], curve  # steps to goal fall as it learns
+    evals = [e for e in run.events("evaluation")]
+    assert len(evals) == 3 and evals[-1].values["steps_to_goal"] == pytest.approx(curve[-1])
+
+
+def test_relearned_embedding_after_a_body_change_keeps_the_old_coordinates():
+    w = MountainCarWorld(n_eval=2)
+    prog = MountainCarProgram(w.spec(), seed=1, eval_every=10**9)
+    with w:
+        drive(w, prog, lambda p: p.phase == "drive")
+        old = {i: prog.position(t) for i, t in enumerate(prog.landmarks)}
+        old_len = np.mean([len(t) for t in prog.landmarks])
+        w.perturb(Control(w.world_id, "morph", {"baseline": "1.4"}))
+        prog.on_drop(0)
+        run, _ = drive(w, prog, lambda p: p.phase == "drive")
+    new = {i: prog.position(t) for i, t in enumerate(prog.landmarks)}
+    assert run.embeddings[-1].trigger.startswith("relearned")
+    span = max(old.values()) - min(old.values())
+    assert max(abs(new[i] - old[i]) for i in old) < 0.08 * span  # the same places read the same positions
+    assert np.mean([len(t) for t in prog.landmarks]) > 1.25 * old_len  # though every trace got longer
+
+
+@pytest.mark.integration
+def test_over_the_bus_position_embedding_evaluations_and_a_live_morph(procs, endpoint):
+    procs.start("agent", "--listen", endpoint, "-q", "--program-param", "mountaincar.eval_every=150",
+                "--program-param", "mountaincar.n_eval=2")
+    watch = procs.start("watch", "--json", "--connect", endpoint)
+    rows: list[dict] = []
+
+    def follow():
+        for line in watch.stdout:
+            rows.append(json.loads(line))
+
+    threading.Thread(target=follow, daemon=True).start()
+    time.sleep(1.0)
+    procs.start("world", "mountaincar", "--id", "mc", "--param", "n_eval=2", "--param", "max_car_steps=150",
+                "--connect", endpoint, "-q")
+    assert wait_for(lambda: any(r.get("type") == "embedding" for r in rows), 120), rows[-5:]
+    emb = next(r for r in rows if r.get("type") == "embedding")
+    assert emb["world"] == "mc" and emb["dims"] == 1 and emb["procrustes_error"] < 0.01
+    assert wait_for(lambda: any(r.get("kind") == "evaluation" for r in rows), 240), rows[-5:]
+    assert procs.start("perturb", "morph", "--world", "mc", "--baseline", "1.4", "--connect", endpoint).wait(20) == 0
+    n = len(rows)
+    assert wait_for(lambda: sum(r.get("kind") == "evaluation" for r in rows[n:]) >= 1, 240)
+    assert not any(r.get("kind") in ("program_error", "bad_action") for r in rows)
