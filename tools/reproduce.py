@@ -106,7 +106,8 @@ def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, m
     elif kind == "random":
         return {"kind": kind, "seed": seed, "curve": [(0, M.random_agent(seed, n_eval))]}
     elif kind == "live":
-        r = M.visual(seed, train, every, n_eval, morph_at=morph_at, morph={"baseline": "1.4"}, detector="cusum")
+        r = M.visual(seed, train, every, n_eval, morph_at=morph_at, morph={"baseline": "1.4"}, detector="cusum",
+                     watch_after=morph_at // 2)
     else:
         body = {"baseline-1.0": {}, "baseline-1.4": {"baseline": 1.4}, "vertical": {"vertical": True}}[kind]
         r = M.visual(seed, train, every, n_eval, **body)
