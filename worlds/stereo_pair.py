@@ -6,7 +6,9 @@ starts at the same column (disparity 0) and moves one pixel per converge action 
 back). The perceptual goal is the shift where the foveated difference (Eq 7.2) is minimal over the
 scan range; reaching it gives reward 1. The trace length is then the disparity. Start states are
 salient points: local maxima of the gradient energy of the blurred left image (a bottom-up
-saliency map), spread apart, with valid ground truth. Truth: the dataset's disparity there.
+saliency map), spread apart, with valid ground truth, whose best match along the row is distinct
+(its difference below `uniqueness` times the best one more than 3 px away: an image-only stereo
+confidence that repeated texture and occlusions fail). Truth: the dataset's disparity there.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ class StereoPairWorld(World):
     kind = "stereo"
 
     def __init__(self, world_id: str = "stereo", seed: int = 0, n_starts: int = 30, radius: int = 10,
-                 max_shift: int = 80) -> None:
+                 max_shift: int = 80, uniqueness: float = 0.7) -> None:
         super().__init__(world_id, seed)
         from skimage import data
 
@@ -50,17 +52,29 @@ class StereoPairWorld(World):
         self.disparity = disp
         self.radius, self.max_shift = radius, max_shift
         self.max_episode_steps = max_shift + 20
-        self.points = salient_points(self.left, disp, n_starts, radius, max_shift)
-        if len(self.points) < 2:
-            raise ValueError("too few salient points with ground truth")
         self.row = self.col = 0
         self.k = self.goal = self.t = 0
+        self.points = salient_points(self.left, disp, 10 * n_starts, radius, max_shift)
+        keep = [i for i, (r, c) in enumerate(self.points) if self._distinct(int(r), int(c), uniqueness)]
+        self.points = self.points[keep[:n_starts]]
+        if len(self.points) < 2:
+            raise ValueError("too few salient points with ground truth")
         self._goals: dict[int, int] = {}
 
     @classmethod
     def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "StereoPairWorld":
         return cls(world_id, seed, n_starts=param(params, "n_starts", 30, int), radius=param(params, "radius", 10, int),
-                   max_shift=param(params, "max_shift", 80, int))
+                   max_shift=param(params, "max_shift", 80, int), uniqueness=param(params, "uniqueness", 0.7, float))
+
+    def _differences(self) -> np.ndarray:
+        return np.array([foveal_difference(*self._patches(k)) for k in range(self.max_shift + 1)])
+
+    def _distinct(self, row: int, col: int, uniqueness: float) -> bool:
+        self.row, self.col = row, col
+        d = self._differences()
+        k = int(np.argmin(d))
+        others = np.r_[d[:max(k - 3, 0)], d[k + 4:]]
+        return others.size == 0 or d[k] < uniqueness * others.min()
 
     def _patches(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         r, c, R = self.row, self.col, self.radius
@@ -82,7 +96,7 @@ class StereoPairWorld(World):
         start = self.pick_start(seed, start, len(self.points))
         self.row, self.col = (int(v) for v in self.points[start])
         if start not in self._goals:
-            self._goals[start] = int(np.argmin([foveal_difference(*self._patches(k)) for k in range(self.max_shift + 1)]))
+            self._goals[start] = int(np.argmin(self._differences()))
         self.goal = self._goals[start]
         self.k = self.t = 0
         return self._obs(0.0, self.goal == 0)

@@ -33,7 +33,7 @@ class VergenceProgram(Program):
     name = "vergence"
 
     def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 300, epsilon: float = 0.2,
-                 gamma: float = 0.95, ridge: float = 1e-3, max_trace: int = 60,
+                 gamma: float = 0.95, ridge: float = 1e-3, max_trace: int = 100,
                  centres: tuple[float, ...] = tuple(np.linspace(0.0, 0.2, 11)), width: float = 0.02) -> None:
         super().__init__(spec, seed)
         if not spec.action_space.discrete or spec.action_space.n != 2 or spec.n_starts < 2:
