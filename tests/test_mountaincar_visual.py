@@ -81,23 +81,16 @@ def test_a_wider_baseline_lengthens_every_trace_and_the_goal_ends_the_episode(wo
         w.close()
 
 
-def drive(world, prog, until, steps=3_000_000, **kw):
+def drive(world, prog, until, steps=3_000_000, on_output=None, **kw):
     out = []
-    run = run_inprocess(world, prog, steps, on_output=out.append, stop_when=lambda r: until(prog), **kw)
+
+    def seen(msg):
+        out.append(msg)
+        if on_output:
+            on_output(msg)
+
+    run = run_inprocess(world, prog, steps, on_output=seen, stop_when=lambda r: until(prog), **kw)
     return run, out
-
-
-def test_staged_program_embeds_position_then_learns_to_drive():
-    w = MountainCarWorld(n_eval=10)
-    prog = MountainCarProgram(w.spec(), seed=0, eval_every=6000)
-    with w:
-        run, out = drive(w, prog, lambda p: len(p.curve) >= 3)
-    emb = run.embeddings[0]
-    assert emb.procrustes_error < 0.01 and len(emb.ids) == w.n_positions  # 1-D position vs the true vergence angle
-    curve = [m for _, m in prog.curve]
-    assert curve[0] > 500 and curve[-1] < 0.6 * curve[0], curve  # steps to goal fall as it learns
-    evals = [e for e in run.events("evaluation")]
-    assert len(evals) == 3 and evals[-1].values["steps_to_goal"] == pytest.approx(curve[-1])
 
 
 def test_relearned_embedding_after_a_body_change_keeps_the_old_coordinates():
@@ -140,3 +133,41 @@ def test_over_the_bus_position_embedding_evaluations_and_a_live_morph(procs, end
     n = len(rows)
     assert wait_for(lambda: sum(r.get("kind") == "evaluation" for r in rows[n:]) >= 1, 240)
     assert not any(r.get("kind") in ("program_error", "bad_action") for r in rows)
+
+
+def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_embeds():
+    """Shortened ch. 8: position from vergence, driving learned on top (evaluated every 10k car
+    steps on 10 fixed states), then the baseline goes 1.0 -> 1.4 m while it drives."""
+    from agent.detectors import make_detector
+
+    w = MountainCarWorld(n_eval=10, seed=1)
+    prog = MountainCarProgram(w.spec(), seed=1, eval_every=10_000, watch_after=25_000)
+    at = {"morph": None}
+    drops: list[int] = []
+
+    def perturb(k):
+        if at["morph"] is None and prog.training_steps >= 40_000:
+            at["morph"] = prog.training_steps
+            return Control(w.world_id, "morph", {"baseline": "1.4"})
+        return None
+
+    def seen(msg):
+        if getattr(msg, "kind", None) == "drop_detected":
+            drops.append(prog.training_steps)
+
+    det = make_detector("cusum", **prog.detector_params)
+    with w:
+        run, _ = drive(w, prog, lambda p: p.relearn_at is not None and p.phase == "drive" or p.training_steps > 52_000,
+                       detector=det, perturb=perturb, on_output=seen)
+    first = run.embeddings[0]
+    assert first.procrustes_error < 0.01 and len(first.ids) == w.n_positions  # 1-D position vs the true angle
+    from tools.experiments.mountaincar import random_agent
+
+    curve = [m for _, m in prog.curve]
+    before = [m for s, m in prog.curve if s < at["morph"]]
+    assert len(before) == 3 and max(before[-2:]) < 0.3 * random_agent(0, 10), curve  # it learned to drive
+    assert [e.values["steps_to_goal"] for e in run.events("evaluation")] == pytest.approx(curve)
+    assert drops and drops[0] > at["morph"], (drops, at)  # no false alarm while it learned
+    assert drops[0] - at["morph"] <= 4000, (drops, at)
+    relearned = run.embeddings[-1]
+    assert relearned.trigger.startswith("relearned") and relearned.procrustes_error < 0.01  # the new body's angles

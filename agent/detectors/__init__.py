@@ -1,5 +1,7 @@
 """Reward-drop detectors behind one interface: update(x) -> drift flag."""
 
+import inspect
+
 from agent.detectors.base import DropDetector, RunningMoments
 from agent.detectors.cusum import CUSUM
 from agent.detectors.moving_average_drop import MovingAverageDrop
@@ -10,10 +12,14 @@ DEFAULT_DETECTOR = "cusum"
 
 
 def make_detector(name: str = DEFAULT_DETECTOR, **params) -> DropDetector:
+    """A detector by name. Parameters it does not take are ignored: programs suggest settings for
+    their performance stream (e.g. `warmup`, `rate`) without knowing which detector the user chose."""
     try:
-        return DETECTORS[name](**params)
+        cls = DETECTORS[name]
     except KeyError:
         raise ValueError(f"unknown detector {name!r}; known: {', '.join(sorted(DETECTORS))}") from None
+    accepted = inspect.signature(cls.__init__).parameters
+    return cls(**{k: v for k, v in params.items() if k in accepted})
 
 
 __all__ = ["CUSUM", "DETECTORS", "DEFAULT_DETECTOR", "DropDetector", "MovingAverageDrop", "PageHinkley",

@@ -13,11 +13,15 @@ coast or forward (reward -1 per car step). Every `eval_every` training car steps
 and the greedy policy is run from the world's fixed evaluation states: the mean steps to goal is
 published as an `evaluation` event (the learning curve).
 
-The body changes: after `watch_after` training steps, each training episode reports how it went
-against what the agent expected, log(expected steps / actual steps), with the expectation read off
-Sarsa's own value at the episode's start (Q = -(1 - gamma^T) / (1 - gamma)). A new camera
-baseline makes every trace longer, positions shift, episodes run long: the daemon's detector sees
-the drop and calls `on_drop`, and the program relearns its vergence policy and re-embeds. The new
+The body changes: after `watch_after` training steps, each training episode reports its
+performance, -(car steps) / report_after, when it ends; a trained driver gives up an episode after
+`report_after` car steps (a failing body would otherwise show itself only once per 1000-step
+timeout). A new camera baseline makes every
+trace longer, positions shift, episodes run long: the daemon's detector sees the drop and calls
+`on_drop`, and the program relearns its vergence policy and re-embeds. (Scoring episodes against
+the agent's own expectation, read off Sarsa's value, was tried first: Sarsa keeps learning and
+lowers its expectation within a few failing episodes, so the surprise faded before a detector saw
+it; the expectation is still logged per episode.) The new
 embedding is put in the old one's coordinates by a similarity fit over the same start states
 (the agent revisits the same places), so what Sarsa learned on top stays valid.
 """
@@ -45,13 +49,15 @@ CONVERGE, DIVERGE, REVERSE = 0, 1, 2
 
 class MountainCarProgram(Program):
     name = "mountaincar"
-    detector_params = {"warmup": 20}  # one value per training episode
+    # one value per training episode: a short warm-up, and a reference that follows an improving
+    # driver within some 20 episodes
+    detector_params = {"warmup": 20, "rate": 0.05}
 
     def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 400, epsilon: float = 0.2,
                  vergence_gamma: float = 0.95, ridge: float = 1e-3, max_trace: int = 80,
                  alpha: float = 0.3, gamma: float = 0.99, lam: float = 0.9, tiles: int = 10, n_tilings: int = 8,
                  drive_epsilon: float = 0.0, eval_every: int = 10_000, n_eval: int | None = None,
-                 watch_after: int = 50_000, process_var: float = 1e-5) -> None:
+                 watch_after: int = 50_000, report_after: int = 400, process_var: float = 1e-5) -> None:
         super().__init__(spec, seed)
         if not spec.action_space.discrete or spec.action_space.n != 5:
             raise SpecMismatch("mountaincar program needs 5 discrete actions (converge, diverge, reverse, coast, forward)")
@@ -67,7 +73,10 @@ class MountainCarProgram(Program):
         if eval_every < 1 or max_trace < 2 or samples_per_iteration < 1:
             raise ValueError("eval_every, max_trace and samples_per_iteration must be positive")
         self.samples_per_iteration, self.epsilon, self.max_trace = samples_per_iteration, epsilon, max_trace
+        if report_after < 1:
+            raise ValueError("report_after must be >= 1")
         self.eval_every, self.watch_after, self.process_var = eval_every, watch_after, process_var
+        self.report_after = report_after
         self.lspi = LSPI(RBFBasis(tuple(float(c) for c in np.linspace(0.0, 0.3, 13)), 0.025, 2),
                          gamma=vergence_gamma, ridge=ridge)
         self._sarsa_args = dict(alpha=alpha, gamma=gamma, lam=lam, tiles=tiles, n_tilings=n_tilings,
@@ -95,7 +104,7 @@ class MountainCarProgram(Program):
         self._s: np.ndarray | None = None
         self._a = 0
         self._ep_steps = 0
-        self._expected: float | None = None
+        self._watching = False
         self._perf: float | None = None
         self._eval_i = 0
         self._eval_steps: list[int] = []
@@ -190,7 +199,8 @@ class MountainCarProgram(Program):
         return self.phase == "evaluate"
 
     def _start_training_episode(self) -> None:
-        self._trace, self._last_drive, self._s, self._ep_steps, self._expected = None, False, None, 0, None
+        self._trace, self._last_drive, self._s, self._ep_steps, self._watching = None, False, None, 0, False
+        self._ep_expected: float | None = None
 
     def _expected_steps(self, s: np.ndarray, a: int) -> float:
         g = self.sarsa.gamma
@@ -231,8 +241,8 @@ class MountainCarProgram(Program):
             a = sarsa.act(s)
             if self._s is None:
                 sarsa.begin_episode()
-                if self.training_steps >= self.watch_after:
-                    self._expected = self._expected_steps(s, a)
+                self._watching = self.training_steps >= self.watch_after
+                self._ep_expected = self._expected_steps(s, a)
             else:
                 sarsa.learn_one(self._s, self._a, -1.0, s, a)
         self._s, self._a = s, a
@@ -240,6 +250,10 @@ class MountainCarProgram(Program):
         self._last_drive = True
         if not self.evaluating:
             self.training_steps += 1
+            if self._watching and self._ep_steps >= self.report_after:
+                # a trained driver gives up an episode this long: it is reported and a new one
+                # begins, so a failing body shows itself every `report_after` steps, not once per timeout
+                return self._end_training_episode()
         return Decision((float(REVERSE + a),))
 
     def _episode_over(self, obs: Observation) -> Decision:
@@ -261,14 +275,22 @@ class MountainCarProgram(Program):
             return Decision(reset=True, start=-1)
         if reached and self._s is not None:
             self.sarsa.learn_one(self._s, self._a, -1.0, self._s, None)
+        return self._end_training_episode()
+
+    def _end_training_episode(self) -> Decision:
         self.episodes += 1
-        self.episode_log.append((self.training_steps, self._ep_steps, self._expected))
-        if self._expected is not None and self._ep_steps > 0:
-            self._perf = math.log((self._expected + 1.0) / (self._ep_steps + 1.0))
+        self.episode_log.append((self.training_steps, self._ep_steps, self._ep_expected))
+        if self._watching and self._ep_steps > 0:
+            self._report(self._ep_steps)
         self._start_training_episode()
         if self.n_eval and self.training_steps // self.eval_every > len(self.curve):
             return self._begin_evaluation()
         return Decision(reset=True, start=-1)
+
+    def _report(self, steps: int) -> None:
+        """Performance of this episode, once: -(car steps) / report_after, in [-1, 0]."""
+        self._perf = -min(steps, self.report_after) / self.report_after
+        self._watching = False
 
     def _begin_evaluation(self) -> Decision:
         self.phase = "evaluate"
