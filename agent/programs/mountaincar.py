@@ -40,7 +40,7 @@ from agent.learners.lspi import LSPI, RBFBasis
 from agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from agent.programs.sweep import StartStateSweep
-from agent.programs.vergence import foveal_difference
+from agent.programs.vergence import VergencePractice, foveal_difference
 from protocol.errors import SpecMismatch
 from protocol.messages import Observation, WorldSpec
 
@@ -72,7 +72,7 @@ class MountainCarProgram(Program):
         self.n_eval = world_evals if n_eval is None else min(n_eval, world_evals)
         if eval_every < 1 or max_trace < 2 or samples_per_iteration < 1:
             raise ValueError("eval_every, max_trace and samples_per_iteration must be positive")
-        self.samples_per_iteration, self.epsilon, self.max_trace = samples_per_iteration, epsilon, max_trace
+        self.max_trace = max_trace
         if report_after < 1:
             raise ValueError("report_after must be >= 1")
         self.eval_every, self.watch_after, self.process_var = eval_every, watch_after, process_var
@@ -82,9 +82,8 @@ class MountainCarProgram(Program):
         self._sarsa_args = dict(alpha=alpha, gamma=gamma, lam=lam, tiles=tiles, n_tilings=n_tilings,
                                 epsilon=drive_epsilon)
         self.sarsa: SarsaLambda | None = None
+        self.practice = VergencePractice(self.lspi, self.rng, samples_per_iteration, epsilon)
         self.phase = "explore"
-        self.new_samples = 0
-        self._prev: tuple[float, int] | None = None
         self._explore_len = 0
         self._sweep = StartStateSweep(self.n_positions, max_trace)
         # the embedding: landmark traces, MDS model, alignment to the first embedding
@@ -114,25 +113,15 @@ class MountainCarProgram(Program):
 
     # stage 1: vergence ---------------------------------------------------------------------------
     def _explore(self, obs: Observation, d: float) -> Decision:
-        if self._prev is not None and obs.t > 0:
-            self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, obs.reward > 0)
-            self.new_samples += 1
-        self._prev = None
-        if self.new_samples >= self.samples_per_iteration:
-            self.new_samples = 0
-            change = self.lspi.iterate()
-            self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}", obs.step,
-                                  {"weight_change": change}))
+        if self.practice.observe(obs, d, obs.reward > 0, self.emit):
             self.phase = "sweep"
             self._sweep = StartStateSweep(self.n_positions, self.max_trace)
             return self._sweep.begin()
         if obs.reward > 0 or obs.done or self._explore_len >= self.max_trace:
             self._explore_len = 0
             return Decision(reset=True, start=-1)
-        a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
-        self._prev = (d, a)
         self._explore_len += 1
-        return Decision((float(a),))
+        return Decision((float(self.practice.choose(d)),))
 
     def _sweeping(self, obs: Observation) -> Decision:
         dec = self._sweep.step(obs, lambda o, tr: self.lspi.greedy(foveal_difference(o)),
@@ -322,11 +311,12 @@ class MountainCarProgram(Program):
         self.relearn_at = step
         self.lspi.reset()
         self._verge = {}
-        self.phase, self.new_samples, self._prev, self._explore_len = "explore", 0, None, 0
+        self.practice.reset()
+        self.phase, self._explore_len = "explore", 0
         self.emit(EventOutput("relearning", "vergence policy relearned from scratch, then re-embedded", step))
 
     def world_restarted(self) -> None:
-        self._prev = None
+        self.practice.reset()
         self._sweep.interrupted()
         self._start_training_episode()
 

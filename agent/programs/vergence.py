@@ -29,6 +29,41 @@ def foveal_difference(obs: Observation) -> float:
     return float(np.abs(left - right).mean())
 
 
+class VergencePractice:
+    """Epsilon-greedy vergence practice feeding LSPI, one LSPI iteration (reported as an event)
+    after every `samples_per_iteration` samples: the learning half of the vergence program, which
+    the mountain-car program runs as its first stage."""
+
+    def __init__(self, lspi: LSPI, rng: np.random.Generator, samples_per_iteration: int, epsilon: float) -> None:
+        if samples_per_iteration < 1 or not 0 <= epsilon <= 1:
+            raise ValueError("samples_per_iteration must be >= 1 and epsilon in [0, 1]")
+        self.lspi, self.rng = lspi, rng
+        self.samples_per_iteration, self.epsilon = samples_per_iteration, epsilon
+        self.reset()
+
+    def reset(self) -> None:
+        self.new_samples = 0
+        self._prev: tuple[float, int] | None = None
+
+    def observe(self, obs: Observation, d: float, terminal: bool, emit) -> bool:
+        """Learn from the step that led to `obs`; True when an LSPI iteration has just run."""
+        if obs.t > 0 and self._prev is not None:
+            self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, terminal)
+            self.new_samples += 1
+        self._prev = None
+        if self.new_samples < self.samples_per_iteration:
+            return False
+        self.new_samples = 0
+        change = self.lspi.iterate()
+        emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}", obs.step, {"weight_change": change}))
+        return True
+
+    def choose(self, d: float) -> int:
+        a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
+        self._prev = (d, a)
+        return a
+
+
 class VergenceProgram(Program):
     name = "vergence"
 
@@ -43,31 +78,20 @@ class VergenceProgram(Program):
         self.epsilon = epsilon
         self.max_trace = max_trace
         self.lspi = LSPI(RBFBasis(tuple(float(c) for c in centres), width, 2), gamma=gamma, ridge=ridge)
+        self.practice = VergencePractice(self.lspi, self.rng, samples_per_iteration, epsilon)
         self.phase = "explore"
-        self.new_samples = 0
-        self._prev: tuple[float, int] | None = None
         self._sweep = StartStateSweep(spec.n_starts, max_trace)
 
     def act(self, obs: Observation) -> Decision:
         d = foveal_difference(obs)
         if self.phase == "explore":
-            if obs.t > 0 and self._prev is not None:
-                self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, obs.done)
-                self.new_samples += 1
-            self._prev = None
-            if self.new_samples >= self.samples_per_iteration:
-                self.new_samples = 0
-                change = self.lspi.iterate()
-                self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}", obs.step,
-                                      {"weight_change": change}))
+            if self.practice.observe(obs, d, obs.done, self.emit):
                 self.phase = "embed"
                 self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
                 return self._sweep.begin()
             if obs.done:
                 return Decision(reset=True, start=-1)
-            a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
-            self._prev = (d, a)
-            return Decision((float(a),))
+            return Decision((float(self.practice.choose(d)),))
         dec = self._sweep.step(obs, lambda o, trace: self.lspi.greedy(foveal_difference(o)))
         if self._sweep.finished:
             self._embed(obs.step)
@@ -86,5 +110,5 @@ class VergenceProgram(Program):
              "mean_trace_length": float(np.mean([len(t) for t in traces]))}))
 
     def world_restarted(self) -> None:
-        self._prev = None
+        self.practice.reset()
         self._sweep.interrupted()
