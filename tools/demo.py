@@ -22,10 +22,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="agent + a world in one command, with progress and a summary",
                        description="Start the agent daemon (zenoh router on --listen, loopback) and a world "
                        "node connected to it, show each embedding version as it arrives, and print a summary. "
-                       "Stops after --seconds or Ctrl-C.")
+                       "Stops after --seconds, --steps or Ctrl-C.")
     p.add_argument("--world", default="gridworld", help="world to run: " + ", ".join(sorted(WORLDS)))
     p.add_argument("--param", action="append", metavar="K=V", help="world parameter, repeatable (e.g. barrier=true)")
     p.add_argument("--seconds", type=float, default=15.0, help="run time in seconds (default 15)")
+    p.add_argument("--steps", type=int, default=None, help="stop after this many world steps (and at most --seconds)")
     p.add_argument("--seed", type=int, default=0, help="seed of world and agent")
     p.add_argument("--listen", default=keys.DEFAULT_ENDPOINT, metavar="ENDPOINT",
                    help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT})")
@@ -36,6 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main_args(args: argparse.Namespace) -> int:
     setup_logging(-1 if not args.verbose else args.verbose)
     params = parse_params(args.param)
+    if args.steps is not None and args.steps < 1:
+        print("sme demo: --steps must be >= 1", file=sys.stderr)
+        return 2
     try:
         world = make_world(args.world, None, args.seed, params)
     except ValueError as e:
@@ -72,7 +76,7 @@ def main_args(args: argparse.Namespace) -> int:
         dthread = threading.Thread(target=daemon.run, daemon=True)
         dthread.start()
         with Bus(BusConfig.for_role("world", args.listen)) as world_bus:
-            node = WorldNode(world, world_bus, wid)
+            node = WorldNode(world, world_bus, wid, max_steps=args.steps)
             nthread = threading.Thread(target=node.run, daemon=True)
             nthread.start()
             next_tick = 5.0
