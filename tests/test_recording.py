@@ -133,9 +133,14 @@ def test_sigkilled_recorder_leaves_a_readable_file(procs, endpoint, tmp_path):
     time.sleep(1.5)
     assert procs.stop(r1) == 0
     upto = sum(1 for r in read(ref) if r.log_time <= t_kill)
-    got = sum(1 for _ in read(victim))
-    print(f"SIGKILLed recorder kept {got} of {upto} messages up to the kill ({got / upto:.1%})")
-    assert upto > 3000 and got >= 0.95 * upto, (got, upto)
+    kept = list(read(victim))
+    got = len(kept)
+    lag = (t_kill - kept[-1].log_time) / 1e9
+    print(f"SIGKILLed recorder kept {got} of {upto} messages up to the kill ({got / upto:.1%}), the last {lag:.2f} s "
+          "before it")
+    # what is lost is the tail: the last flush interval plus what a loaded machine had not yet written
+    # (99.99 % idle, 93.8 % with both cores busy with other work)
+    assert upto > 3000 and got >= 0.85 * upto and lag < 2.0, (got, upto, lag)
     # replay reads it; recover makes a complete file every tool opens
     off = subprocess.run([sys.executable, "-m", "tools.cli", "replay", victim, "--offline"], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
