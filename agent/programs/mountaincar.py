@@ -21,15 +21,13 @@ trace longer, positions shift, episodes run long: the daemon's detector sees the
 `on_drop`, and the program relearns its vergence policy and re-embeds. (Scoring episodes against
 the agent's own expectation, read off Sarsa's value, was tried first: Sarsa keeps learning and
 lowers its expectation within a few failing episodes, so the surprise faded before a detector saw
-it; the expectation is still logged per episode.) The new
+it.) The new
 embedding is put in the old one's coordinates by a similarity fit over the same start states
 (the agent revisits the same places), so what Sarsa learned on top stays valid.
 """
 
 from __future__ import annotations
 
-import math
-from typing import Any
 
 import numpy as np
 
@@ -108,7 +106,7 @@ class MountainCarProgram(Program):
         self._eval_i = 0
         self._eval_steps: list[int] = []
         self.curve: list[tuple[int, float]] = []
-        self.episode_log: list[tuple[int, int, float | None]] = []  # (training steps at end, car steps, expected)
+        self.episode_log: list[tuple[int, int]] = []  # (training steps at the end, car steps) per training episode
         self.relearn_at: int | None = None
 
     # stage 1: vergence ---------------------------------------------------------------------------
@@ -189,13 +187,6 @@ class MountainCarProgram(Program):
 
     def _start_training_episode(self) -> None:
         self._trace, self._last_drive, self._s, self._ep_steps, self._watching = None, False, None, 0, False
-        self._ep_expected: float | None = None
-
-    def _expected_steps(self, s: np.ndarray, a: int) -> float:
-        g = self.sarsa.gamma
-        q = float(self.sarsa.q(s)[a])
-        inner = 1.0 + (1.0 - g) * q
-        return math.log(inner) / math.log(g) if 0.0 < inner < 1.0 and 0 < g < 1 else (0.0 if inner >= 1.0 else 1e4)
 
     def _drive(self, obs: Observation) -> Decision:
         if obs.t == 0:
@@ -231,7 +222,6 @@ class MountainCarProgram(Program):
             if self._s is None:
                 sarsa.begin_episode()
                 self._watching = self.training_steps >= self.watch_after
-                self._ep_expected = self._expected_steps(s, a)
             else:
                 sarsa.learn_one(self._s, self._a, -1.0, s, a)
         self._s, self._a = s, a
@@ -268,7 +258,7 @@ class MountainCarProgram(Program):
 
     def _end_training_episode(self) -> Decision:
         self.episodes += 1
-        self.episode_log.append((self.training_steps, self._ep_steps, self._ep_expected))
+        self.episode_log.append((self.training_steps, self._ep_steps))
         if self._watching and self._ep_steps > 0:
             self._report(self._ep_steps)
         self._start_training_episode()
@@ -319,7 +309,3 @@ class MountainCarProgram(Program):
         self.practice.reset()
         self._sweep.interrupted()
         self._start_training_episode()
-
-    def summary(self) -> dict[str, Any]:
-        return {"phase": self.phase, "training_steps": self.training_steps, "episodes": self.episodes,
-                "curve": list(self.curve)}
