@@ -140,7 +140,7 @@ def test_sigkilled_recorder_leaves_a_readable_file(procs, endpoint, tmp_path):
           "before it")
     # what is lost is the tail: the last flush interval plus what a loaded machine had not yet written
     # (99.99 % idle, 93.8 % with both cores busy with other work)
-    assert upto > 3000 and got >= 0.85 * upto and lag < 2.0, (got, upto, lag)
+    assert upto > 1000 and got >= 0.85 * upto and lag < 2.0, (got, upto, lag)  # ~4000 in 6 s when idle
     # replay reads it; recover makes a complete file every tool opens
     off = subprocess.run([sys.executable, "-m", "tools.cli", "replay", victim, "--offline"], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
