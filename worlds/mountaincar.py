@@ -32,7 +32,7 @@ import numpy as np
 from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from worlds.base import PerturbationError, StepResult, param
 from worlds.mountaincar_dynamics import EVAL_SEED, MountainCarParams, evaluation_states, random_state, step as car_step
-from worlds.vergence import VergenceWorld, foveal_difference, verge
+from worlds.vergence import VergenceWorld, verge
 
 CONVERGE, DIVERGE, REVERSE, COAST, FORWARD = range(5)
 
@@ -107,15 +107,7 @@ class MountainCarWorld(VergenceWorld):
         if cell not in self._goals:
             centre = int(round(float(self.true_angle(cell * self.render_grid)) / self.step_rad))
             ks = range(max(centre - self.goal_window, 0), min(centre + self.goal_window, self.max_episode_steps) + 1)
-            saved = self.theta
-            d = []
-            try:
-                for k in ks:
-                    self.theta = k * self.step_rad
-                    d.append(foveal_difference(*self.render()))
-            finally:
-                self.theta = saved
-            self._goals[cell] = ks[int(np.argmin(d))]
+            self._goals[cell] = ks[int(np.argmin(self.differences(ks)))]
         return self._goals[cell]
 
     # World interface ---------------------------------------------------------------------------

@@ -168,12 +168,12 @@ class VergenceWorld(World):
                          / 255.0).astype(np.float32))
         return imgs[0], imgs[1]
 
-    def differences(self) -> np.ndarray:
-        """d(r, l) at every vergence step 0..max_episode_steps from the current position."""
+    def differences(self, ks: range | None = None) -> np.ndarray:
+        """d(r, l) at vergence steps `ks` (default every step 0..max_episode_steps) from the current position."""
         saved = self.theta
         out = []
         try:
-            for k in range(self.max_episode_steps + 1):
+            for k in range(self.max_episode_steps + 1) if ks is None else ks:
                 self.theta = k * self.step_rad
                 out.append(foveal_difference(*self.render()))
         finally:

@@ -58,6 +58,11 @@ class SarsaLambda:
         best = np.flatnonzero(q == q.max())
         return int(best[self.rng.integers(best.size)])
 
+    def greedy(self, state: np.ndarray) -> int:
+        """The best action, ties to the lowest index: deterministic, for evaluation."""
+        q = self.q(state)
+        return int(np.flatnonzero(q == q.max())[0])
+
     def begin_episode(self) -> None:
         self.z[:] = 0.0
 

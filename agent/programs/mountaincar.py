@@ -215,8 +215,7 @@ class MountainCarProgram(Program):
         s = np.array([pos, vel])
         sarsa = self.sarsa
         if self.evaluating:
-            q = sarsa.q(s)
-            a = int(np.flatnonzero(q == q.max())[0])
+            a = sarsa.greedy(s)
         else:
             a = sarsa.act(s)
             if self._s is None:
@@ -239,6 +238,7 @@ class MountainCarProgram(Program):
         reached = obs.reward > 0
         if self.evaluating:
             self._eval_steps.append(self._ep_steps)
+            self._eval_reached.append(reached)
             self._eval_i += 1
             if self._eval_i < self.n_eval:
                 return self._eval_reset()
@@ -286,8 +286,6 @@ class MountainCarProgram(Program):
             return self._explore(obs, foveal_difference(obs))
         if self.phase == "sweep":
             return self._sweeping(obs)
-        if self.evaluating and obs.t > 0 and self._last_drive and obs.done:
-            self._eval_reached.append(obs.reward > 0)
         return self._drive(obs)
 
     def performance(self, obs: Observation) -> float | None:

@@ -72,10 +72,6 @@ def true_state(seed: int, train_steps: int, eval_every: int = 10_000, n_eval: in
     agent = SarsaLambda(coder, 3, alpha=alpha, gamma=gamma, lam=lam, epsilon=0.0, seed=seed)
     evals = evaluation_states(n_eval)
 
-    def greedy(s: np.ndarray) -> int:
-        q = agent.q(s)
-        return int(np.flatnonzero(q == q.max())[0])
-
     res = DriveResult([])
     n = 0
     while len(res.curve) < train_steps // eval_every:
@@ -94,7 +90,7 @@ def true_state(seed: int, train_steps: int, eval_every: int = 10_000, n_eval: in
             agent.learn_one(s, a, -1.0, s2, a2)
             s, a = s2, a2
         if n // eval_every > len(res.curve):
-            res.curve.append((n, steps_to_goal(greedy, evals, max_car_steps)))
+            res.curve.append((n, steps_to_goal(agent.greedy, evals, max_car_steps)))
     return res
 
 
