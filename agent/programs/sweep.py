@@ -22,14 +22,16 @@ class StartStateSweep:
         self.finished = False
         self._start = 0
         self._trace: list[int] = []
+        self._restart = False
 
     def begin(self) -> Decision:
         return Decision(reset=True, start=0)
 
     def step(self, obs: Observation, choose: Callable[[Observation, list[int]], int],
              stop: Callable[[Observation, list[int]], bool] | None = None) -> Decision:
-        if obs.t == 0 and obs.start != self._start:
-            return Decision(reset=True, start=self._start)  # e.g. the world restarted mid-episode
+        if self._restart or (obs.t == 0 and obs.start != self._start):
+            self._restart = False  # the world or the agent restarted mid-trace: this start state again
+            return Decision(reset=True, start=self._start)
         if obs.done or len(self._trace) >= self.max_trace or (stop is not None and stop(obs, self._trace)):
             self.rewarded += int(obs.reward > 0 or (obs.done and not self._trace))
             self.traces.append(self._trace)
@@ -44,5 +46,6 @@ class StartStateSweep:
         return Decision((float(a),))
 
     def interrupted(self) -> None:
-        """The world restarted: the trace in progress starts again."""
+        """The world or the agent restarted: the trace in progress starts again, from a reset."""
         self._trace = []
+        self._restart = not self.finished
