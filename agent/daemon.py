@@ -17,13 +17,13 @@ import threading
 import time
 from typing import Any, Callable
 
-from agent.detectors import DEFAULT_DETECTOR, make_detector
-from agent.link import WorldLink
-from agent.programs.registry import make_program
-from protocol import codec, keys
-from protocol.bus import Bus, BusError, BusMessage
-from protocol.errors import ProtocolError
-from protocol.messages import (
+from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
+from sensorimotor.agent.link import WorldLink
+from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.bus import Bus, BusError, BusMessage
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import (
     Action, AgentEvent, AgentStatus, Embedding, Truth, WorldSpec,
 )
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.embedding import procrustes_error
-from agent.programs.base import EmbeddingOutput
-from protocol.messages import Truth
+from sensorimotor.agent.embedding import procrustes_error
+from sensorimotor.agent.programs.base import EmbeddingOutput
+from sensorimotor.protocol.messages import Truth
 
 
 def evaluate_embedding(output: EmbeddingOutput, truth: Truth | None) -> dict[str, float]:

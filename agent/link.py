@@ -13,13 +13,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from agent.detectors import DropDetector
-from agent.evaluation import evaluate_embedding
-from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
-from protocol import codec
-from protocol.bus import Inbox
-from protocol.errors import ProtocolError, SpecMismatch
-from protocol.messages import Action, AgentEvent, Embedding, LinkStatus, Observation, Truth, WorldSpec
+from sensorimotor.agent.detectors import DropDetector
+from sensorimotor.agent.evaluation import evaluate_embedding
+from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.protocol import codec
+from sensorimotor.protocol.bus import Inbox
+from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
+from sensorimotor.protocol.messages import Action, AgentEvent, Embedding, LinkStatus, Observation, Truth, WorldSpec
 
 log = logging.getLogger("sme.agent")
 

@@ -1,12 +1,12 @@
 """The wire contract: message schemas, key expressions, validating codec, and the zenoh bus."""
 
-from protocol import keys
-from protocol.codec import decode, encode, schema_name
-from protocol.errors import (
+from sensorimotor.protocol import keys
+from sensorimotor.protocol.codec import decode, encode, schema_name
+from sensorimotor.protocol.errors import (
     BadDtype, MalformedMessage, NonFiniteValue, OversizeMessage, ProtocolError, ShapeMismatch,
     SpecMismatch, UnknownVersion,
 )
-from protocol.messages import (
+from sensorimotor.protocol.messages import (
     SCHEMA_VERSION, Action, ActionSpace, AgentEvent, AgentStatus, Control, Embedding, LinkStatus,
     Observation, SensorSpec, Truth, WorldSpec,
 )

@@ -22,7 +22,7 @@ from typing import Any, Callable, NamedTuple
 
 import zenoh
 
-from protocol.keys import DEFAULT_ENDPOINT
+from sensorimotor.protocol.keys import DEFAULT_ENDPOINT
 
 log = logging.getLogger("sme.bus")
 

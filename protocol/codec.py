@@ -13,8 +13,8 @@ from typing import Any, Callable
 import numpy as np
 from google.protobuf.message import DecodeError
 
-from protocol import errors, messages as m
-from protocol import sme_v1_pb2 as pb
+from sensorimotor.protocol import errors, messages as m
+from sensorimotor.protocol import sme_v1_pb2 as pb
 
 MAX_MESSAGE_BYTES = 64 * 1024 * 1024
 MAX_TENSORS = 64
@@ -305,7 +305,7 @@ def descriptor_set(full_name: str) -> bytes:
     protobuf schema records need. Knows sme.v1.* and foxglove.RawImage."""
     from google.protobuf import descriptor_pb2, descriptor_pool
 
-    from protocol import images  # noqa: F401  (registers foxglove.RawImage in the default pool)
+    from sensorimotor.protocol import images  # noqa: F401  (registers foxglove.RawImage in the default pool)
 
     try:
         desc = descriptor_pool.Default().FindMessageTypeByName(full_name)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.common import free_port
+from sensorimotor.tools.common import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,7 +29,7 @@ class Procs:
 
     def start(self, *args: str, stdout=subprocess.PIPE, stderr=subprocess.PIPE) -> subprocess.Popen:
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        p = subprocess.Popen([sys.executable, "-m", "tools.cli", *args], cwd=ROOT, stdout=stdout, stderr=stderr,
+        p = subprocess.Popen([sys.executable, "-m", "sensorimotor.tools.cli", *args], cwd=ROOT, stdout=stdout, stderr=stderr,
                              text=True, env=env)
         self.procs.append(p)
         return p

@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from protocol import codec, errors
-from protocol import sme_v1_pb2 as pb
-from protocol.messages import (
+from sensorimotor.protocol import codec, errors
+from sensorimotor.protocol import sme_v1_pb2 as pb
+from sensorimotor.protocol.messages import (
     Action, ActionSpace, AgentEvent, AgentStatus, Control, Embedding, LinkStatus, Observation, SensorSpec,
     Truth, WorldSpec,
 )

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from agent.detectors import CUSUM, DETECTORS, MovingAverageDrop, PageHinkley, make_detector
+from sensorimotor.agent.detectors import CUSUM, DETECTORS, MovingAverageDrop, PageHinkley, make_detector
 
 
 def stream(seed, pre=3000, post=500, drop=2.0, sd=1.0, level=0.0):

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
-from agent.embedding import (
+from sensorimotor.agent.embedding import (
     PreparedTraces, classical_mds, landmark_mds, landmark_trace_embedding, procrustes_error, trace_cross_distances,
     trace_distances, update_trace_distances,
 )
-from agent.embedding import trace_kernels as K
+from sensorimotor.agent.embedding import trace_kernels as K
 from tests.test_embedding_math import naive_edit, naive_padded
 
 
@@ -23,7 +23,7 @@ def test_compiled_pairs_equal_naive_and_numpy(pad):
     tr = traces()
     D = trace_distances(tr, pad=pad)
     np.testing.assert_allclose(D, naive_padded(tr, pad), atol=1e-12)
-    from agent.embedding.trace_distances import pad_traces
+    from sensorimotor.agent.embedding.trace_distances import pad_traces
 
     ref = np.empty_like(D)
     K.padded_sum_pairs_numpy(pad_traces(tr, pad), ref)
@@ -111,7 +111,7 @@ def test_landmark_mds_is_exact_on_euclidean_data_and_close_on_traces():
     X = rng.normal(size=(2000, 2))
     res = landmark_mds(2000, lambda idx: cdist(X, X[idx]), 2, n_landmarks=50)
     assert res.landmarks.size == 50 and procrustes_error(X, res.coordinates) < 1e-20
-    from tools.bench.embedding import continuous_traces
+    from sensorimotor.tools.bench.embedding import continuous_traces
 
     tr, P = continuous_traces(3000, seed=2)
     exact = classical_mds(trace_distances(tr, dtype=np.float32), 2, method="topk", overwrite=True).coordinates
@@ -122,7 +122,7 @@ def test_landmark_mds_is_exact_on_euclidean_data_and_close_on_traces():
 
 
 def test_landmark_model_places_new_traces():
-    from tools.bench.embedding import continuous_traces
+    from sensorimotor.tools.bench.embedding import continuous_traces
 
     tr, P = continuous_traces(1500, seed=3)
     lm = landmark_trace_embedding(tr[:1000], 2, n_landmarks=150)

@@ -3,7 +3,7 @@ import pytest
 from scipy.spatial import procrustes as scipy_procrustes
 from scipy.spatial.distance import cdist
 
-from agent.embedding import classical_mds, procrustes, procrustes_error, trace_distances
+from sensorimotor.agent.embedding import classical_mds, procrustes, procrustes_error, trace_distances
 
 
 def naive_padded(traces, pad="append"):

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from agent.learners.lspi import LSPI, TabularBasis
-from agent.programs.gridworld import GridworldProgram
-from tools.inprocess import run_inprocess
-from worlds.gridworld import GridWorld
+from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
+from sensorimotor.agent.programs.gridworld import GridworldProgram
+from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.worlds.gridworld import GridWorld
 
 
 def embeddings(run):
@@ -64,7 +64,7 @@ def test_gridworld_dynamics_walls_and_goal():
 def test_gridworld_rejects_bad_params():
     with pytest.raises(ValueError, match="actions"):
         GridWorld(actions=5)
-    from worlds.registry import make_world
+    from sensorimotor.worlds.registry import make_world
     with pytest.raises(ValueError, match="not a valid int"):
         make_world("gridworld", params={"size": "nine"})
     with pytest.raises(ValueError, match="unknown world"):

@@ -10,10 +10,10 @@ import time
 import numpy as np
 import pytest
 
-from protocol import codec, keys
-from protocol import sme_v1_pb2 as pb
-from protocol.bus import Bus, BusConfig, BusError
-from protocol.messages import AgentEvent, AgentStatus, Observation
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol import sme_v1_pb2 as pb
+from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Observation
 from tests.conftest import wait_for
 
 pytestmark = pytest.mark.integration

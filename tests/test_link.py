@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from agent.detectors import CUSUM
-from agent.link import WorldLink
-from agent.programs.base import Decision, Program
-from protocol import codec
-from protocol.messages import ActionSpace, Observation, SensorSpec, WorldSpec
+from sensorimotor.agent.detectors import CUSUM
+from sensorimotor.agent.link import WorldLink
+from sensorimotor.agent.programs.base import Decision, Program
+from sensorimotor.protocol import codec
+from sensorimotor.protocol.messages import ActionSpace, Observation, SensorSpec, WorldSpec
 
 SPEC = WorldSpec("w", "toy", (SensorSpec("x", "float32", (2,)),), ActionSpace(n=2), program="toy")
 

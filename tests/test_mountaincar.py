@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from agent.learners.kalman_velocity import VelocityFilter
-from agent.learners.sarsa_lambda import SarsaLambda, TileCoder
-from worlds.mountaincar_dynamics import MountainCarParams, random_state, step
+from sensorimotor.agent.learners.kalman_velocity import VelocityFilter
+from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, random_state, step
 
 
 def test_dynamics_follow_equations_8_1_to_8_6():

@@ -10,12 +10,12 @@ import time
 import numpy as np
 import pytest
 
-from agent.programs.mountaincar import MountainCarProgram
-from protocol.messages import Control
+from sensorimotor.agent.programs.mountaincar import MountainCarProgram
+from sensorimotor.protocol.messages import Control
 from tests.conftest import wait_for
-from tools.inprocess import run_inprocess
-from worlds.mountaincar import COAST, CONVERGE, FORWARD, MountainCarWorld
-from worlds.mountaincar_dynamics import evaluation_states, step as car_step
+from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.worlds.mountaincar import COAST, CONVERGE, FORWARD, MountainCarWorld
+from sensorimotor.worlds.mountaincar_dynamics import evaluation_states, step as car_step
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +138,7 @@ def test_over_the_bus_position_embedding_evaluations_and_a_live_morph(procs, end
 def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_embeds():
     """Shortened ch. 8: position from vergence, driving learned on top (evaluated every 10k car
     steps on 10 fixed states), then the baseline goes 1.0 -> 1.4 m while it drives."""
-    from agent.detectors import make_detector
+    from sensorimotor.agent.detectors import make_detector
 
     w = MountainCarWorld(n_eval=10, seed=1)
     prog = MountainCarProgram(w.spec(), seed=1, eval_every=10_000, watch_after=25_000)
@@ -161,7 +161,7 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
                        detector=det, perturb=perturb, on_output=seen)
     first = run.embeddings[0]
     assert first.procrustes_error < 0.01 and len(first.ids) == w.n_positions  # 1-D position vs the true angle
-    from tools.experiments.mountaincar import random_agent
+    from sensorimotor.tools.experiments.mountaincar import random_agent
 
     curve = [m for _, m in prog.curve]
     before = [m for s, m in prog.curve if s < at["morph"]]

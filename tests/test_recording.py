@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT, wait_for
-from tools.common import free_port
-from tools.mcap_io import read
-from tools.replay import replay_offline
+from sensorimotor.tools.common import free_port
+from sensorimotor.tools.mcap_io import read
+from sensorimotor.tools.replay import replay_offline
 
 pytestmark = pytest.mark.integration
 
@@ -142,11 +142,11 @@ def test_sigkilled_recorder_leaves_a_readable_file(procs, endpoint, tmp_path):
     # (99.99 % idle, 93.8 % with both cores busy with other work)
     assert upto > 1000 and got >= 0.85 * upto and lag < 2.0, (got, upto, lag)  # ~4000 in 6 s when idle
     # replay reads it; recover makes a complete file every tool opens
-    off = subprocess.run([sys.executable, "-m", "tools.cli", "replay", victim, "--offline"], cwd=ROOT,
+    off = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "replay", victim, "--offline"], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
     assert "embeddings" in off.stderr
     fixed = str(tmp_path / "fixed.mcap")
-    rc = subprocess.run([sys.executable, "-m", "tools.cli", "recover", victim, fixed], cwd=ROOT, capture_output=True,
+    rc = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "recover", victim, fixed], cwd=ROOT, capture_output=True,
                         text=True, timeout=120)
     assert rc.returncode == 0
     from mcap.reader import make_reader
@@ -173,7 +173,7 @@ def test_view_saves_an_rrd_that_rerun_loads(procs, endpoint, tmp_path):
 
 
 def test_recorder_keeps_up_with_two_lockstep_worlds():
-    from tools.bench.record import run
+    from sensorimotor.tools.bench.record import run
 
     r = run(steps=2000, obs_bytes=16384)
     assert r["all_written"], r

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from tools.experiments import retina as R
+from sensorimotor.tools.experiments import retina as R
 
 
 def test_saccades_and_geometry_improve_with_training():

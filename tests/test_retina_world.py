@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from protocol.messages import Control
-from worlds.base import PerturbationError
-from worlds.retina import RetinaWorld, field_layout
+from sensorimotor.protocol.messages import Control
+from sensorimotor.worlds.base import PerturbationError
+from sensorimotor.worlds.retina import RetinaWorld, field_layout
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +96,7 @@ def test_noise_and_bad_controls(world):
 def test_params_are_validated():
     with pytest.raises(ValueError, match="scene"):
         RetinaWorld(scene="fog")
-    from worlds.registry import make_world
+    from sensorimotor.worlds.registry import make_world
 
     with pytest.raises(ValueError, match="not a valid int"):
         make_world("retina", params={"layers": "four"})

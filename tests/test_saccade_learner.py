@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from agent.learners.saccade import SaccadeLearner
+from sensorimotor.agent.learners.saccade import SaccadeLearner
 
 
 def toy_retina(n=64, seed=0):

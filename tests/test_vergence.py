@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from agent.embedding import procrustes_error
-from agent.learners.lspi import LSPI, RBFBasis
-from agent.programs.vergence import VergenceProgram
-from protocol.messages import Control
-from tools.inprocess import run_inprocess
-from worlds.stereo_pair import StereoPairWorld
-from worlds.vergence import VergenceWorld
+from sensorimotor.agent.embedding import procrustes_error
+from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
+from sensorimotor.agent.programs.vergence import VergenceProgram
+from sensorimotor.protocol.messages import Control
+from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.worlds.stereo_pair import StereoPairWorld
+from sensorimotor.worlds.vergence import VergenceWorld
 
 
 @pytest.fixture(scope="module")

@@ -9,11 +9,11 @@ from typing import Any
 import signal
 import threading
 
-from agent.daemon import AgentDaemon
-from agent.detectors import DEFAULT_DETECTOR, DETECTORS
-from protocol import keys
-from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from tools.common import add_verbosity, setup_logging, verbosity
+from sensorimotor.agent.daemon import AgentDaemon
+from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
+from sensorimotor.protocol import keys
+from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from sensorimotor.tools.common import add_verbosity, setup_logging, verbosity
 
 log = logging.getLogger("sme.agent")
 

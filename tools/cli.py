@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tools import agent_cmd, demo, perturb, record, replay, reproduce, status, view, watch, world_cmd
-from tools.bench import cli as bench_cli
+from sensorimotor.tools import agent_cmd, demo, perturb, record, replay, reproduce, status, view, watch, world_cmd
+from sensorimotor.tools.bench import cli as bench_cli
 
 
 def build_parser() -> argparse.ArgumentParser:

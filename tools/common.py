@@ -10,7 +10,7 @@ import socket
 import sys
 from typing import Any
 
-from protocol.messages import AgentEvent, AgentStatus, Embedding
+from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding
 
 
 def setup_logging(verbosity: int = 0) -> None:

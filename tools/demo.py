@@ -9,13 +9,13 @@ import threading
 import time
 from typing import Any
 
-from agent.daemon import AgentDaemon
-from protocol import keys
-from protocol.bus import Bus, BusConfig, BusError
-from protocol.messages import AgentEvent, Embedding
-from tools.common import add_verbosity, format_embedding, format_event, parse_params, setup_logging
-from worlds.node import WorldNode
-from worlds.registry import WORLDS, make_world
+from sensorimotor.agent.daemon import AgentDaemon
+from sensorimotor.protocol import keys
+from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.protocol.messages import AgentEvent, Embedding
+from sensorimotor.tools.common import add_verbosity, format_embedding, format_event, parse_params, setup_logging
+from sensorimotor.worlds.node import WorldNode
+from sensorimotor.worlds.registry import WORLDS, make_world
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

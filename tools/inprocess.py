@@ -10,11 +10,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from agent.detectors import DropDetector
-from agent.link import WorldLink
-from agent.programs.base import Program
-from protocol.messages import AgentEvent, Control, Embedding, Observation
-from worlds.base import World
+from sensorimotor.agent.detectors import DropDetector
+from sensorimotor.agent.link import WorldLink
+from sensorimotor.agent.programs.base import Program
+from sensorimotor.protocol.messages import AgentEvent, Control, Embedding, Observation
+from sensorimotor.worlds.base import World
 
 
 @dataclass

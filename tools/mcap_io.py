@@ -53,7 +53,7 @@ class McapSink:
             if not schema:
                 sid = 0
             else:
-                from protocol.codec import descriptor_set
+                from sensorimotor.protocol.codec import descriptor_set
 
                 try:
                     sid = self._w.register_schema(schema, "protobuf", descriptor_set(schema))

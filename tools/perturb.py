@@ -6,10 +6,10 @@ import argparse
 import sys
 import time
 
-from protocol import codec, keys
-from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from protocol.messages import Control
-from tools.common import parse_params
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.messages import Control
+from sensorimotor.tools.common import parse_params
 
 KINDS = {
     "lesion": "retina: fields within --param radius=R px of (u, v) px read 0 (default a small off-centre part "

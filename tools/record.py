@@ -11,10 +11,10 @@ import threading
 import time
 from typing import Any
 
-from protocol import codec, keys
-from protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
-from protocol.messages import Truth, WorldSpec
-from tools.mcap_io import COMPRESSIONS, McapSink, Record, schema_of
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.messages import Truth, WorldSpec
+from sensorimotor.tools.mcap_io import COMPRESSIONS, McapSink, Record, schema_of
 
 log = logging.getLogger("sme.record")
 

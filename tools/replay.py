@@ -28,15 +28,15 @@ from typing import Any, Iterable
 
 
 
-from agent.detectors import DEFAULT_DETECTOR, DETECTORS, make_detector
-from agent.link import WorldLink
-from agent.programs.registry import make_program
-from protocol import codec, keys
-from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from protocol.errors import ProtocolError
-from protocol.messages import Action, AgentEvent, Embedding, Observation, Truth, WorldSpec
-from tools.common import embedding_dict, print_json
-from tools.mcap_io import Record, read
+from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS, make_detector
+from sensorimotor.agent.link import WorldLink
+from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import Action, AgentEvent, Embedding, Observation, Truth, WorldSpec
+from sensorimotor.tools.common import embedding_dict, print_json
+from sensorimotor.tools.mcap_io import Record, read
 
 log = logging.getLogger("sme.replay")
 
@@ -382,7 +382,7 @@ def main_args(args: argparse.Namespace) -> int:
 
 
 def recover_main(args: argparse.Namespace) -> int:
-    from tools.mcap_io import recover
+    from sensorimotor.tools.mcap_io import recover
 
     n = recover(args.src, args.dst)
     print(f"sme recover: {n} messages written to {args.dst}")

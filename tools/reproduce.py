@@ -34,9 +34,9 @@ def _fmt(ms: tuple[float, float], digits: int = 2) -> str:
 # --- jobs (top-level functions: picklable for worker processes) ----------------------------------
 
 def job_grid(seed: int, barrier: bool, steps: int, policy: str = "lspi") -> dict:
-    from agent.programs.gridworld import GridworldProgram
-    from tools.inprocess import run_inprocess
-    from worlds.gridworld import GridWorld
+    from sensorimotor.agent.programs.gridworld import GridworldProgram
+    from sensorimotor.tools.inprocess import run_inprocess
+    from sensorimotor.worlds.gridworld import GridWorld
 
     w = GridWorld(seed=seed, barrier=barrier)
     p = GridworldProgram(w.spec(), seed=seed, policy=policy, samples_per_iteration=400 if policy == "lspi" else 50)
@@ -45,7 +45,7 @@ def job_grid(seed: int, barrier: bool, steps: int, policy: str = "lspi") -> dict
 
 
 def job_learning(seed: int, steps: int, every: int, supersample: int) -> dict:
-    from tools.experiments import retina as R
+    from sensorimotor.tools.experiments import retina as R
 
     c = R.learning(seed, steps=steps, every=every, supersample=supersample)
     return {"seed": seed, "steps": c.steps, "one": c.one, "two": c.two, "activation": c.activation,
@@ -53,7 +53,7 @@ def job_learning(seed: int, steps: int, every: int, supersample: int) -> dict:
 
 
 def job_lesion(seed: int, rule: str, at: int, steps: int, every: int, supersample: int) -> dict:
-    from tools.experiments import retina as R
+    from sensorimotor.tools.experiments import retina as R
 
     r = R.perturbation(seed, "lesion", at=at, steps=steps, rule=rule, detector=None, supersample=supersample,
                        exploration="gaussian", every=every, embed_every=10**9)
@@ -62,7 +62,7 @@ def job_lesion(seed: int, rule: str, at: int, steps: int, every: int, supersampl
 
 
 def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
-    from tools.experiments import retina as R
+    from sensorimotor.tools.experiments import retina as R
 
     r = R.perturbation(seed, "reverse", at=at, steps=steps, supersample=supersample)
     embs = [{"version": e.version, "trigger": e.trigger, "procrustes_error": e.procrustes_error,
@@ -77,9 +77,9 @@ def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
 def job_vergence(seed: int, world: str, iterations: int) -> dict:
     import numpy as np
 
-    from agent.programs.vergence import VergenceProgram
-    from tools.inprocess import run_inprocess
-    from worlds.registry import make_world
+    from sensorimotor.agent.programs.vergence import VergenceProgram
+    from sensorimotor.tools.inprocess import run_inprocess
+    from sensorimotor.worlds.registry import make_world
 
     w = make_world(world, None, seed, {})
     goals = []
@@ -99,7 +99,7 @@ def job_vergence(seed: int, world: str, iterations: int) -> dict:
 
 
 def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, morph_at: int | None = None) -> dict:
-    from tools.experiments import mountaincar as M
+    from sensorimotor.tools.experiments import mountaincar as M
 
     if kind == "true":
         r = M.true_state(seed, train, every, n_eval)

@@ -6,11 +6,11 @@ import argparse
 import json
 import sys
 
-from protocol import codec, keys
-from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from protocol.errors import ProtocolError
-from protocol.messages import AgentStatus
-from tools.common import status_dict
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import AgentStatus
+from sensorimotor.tools.common import status_dict
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from protocol import codec, images, keys
-from protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
-from protocol.errors import ProtocolError
-from protocol.messages import AgentEvent, AgentStatus, Embedding, Observation, Truth
-from tools.replay import classify
+from sensorimotor.protocol import codec, images, keys
+from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding, Observation, Truth
+from sensorimotor.tools.replay import classify
 
 
 def truth_colours(truth: Truth | None, ids: tuple[int, ...]) -> np.ndarray | None:
@@ -131,7 +131,7 @@ def main_args(args: argparse.Namespace) -> int:
         rr.spawn()
     log = RerunLogger(rr)
     if args.file:
-        from tools.mcap_io import read
+        from sensorimotor.tools.mcap_io import read
 
         for rec in read(args.file):
             log.handle(rec.topic, rec.data, rec.log_time / 1e9)

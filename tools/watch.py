@@ -8,11 +8,11 @@ import sys
 import threading
 import time
 
-from protocol import codec, keys
-from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from protocol.errors import ProtocolError
-from protocol.messages import AgentEvent, Embedding
-from tools.common import embedding_dict, event_dict, format_embedding, format_event, print_json
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import AgentEvent, Embedding
+from sensorimotor.tools.common import embedding_dict, event_dict, format_embedding, format_event, print_json
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

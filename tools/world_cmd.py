@@ -6,10 +6,10 @@ import argparse
 import json
 import logging
 
-from protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from tools.common import add_verbosity, parse_params, setup_logging, verbosity
-from worlds.node import WorldNode
-from worlds.registry import WORLDS, make_world
+from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from sensorimotor.tools.common import add_verbosity, parse_params, setup_logging, verbosity
+from sensorimotor.worlds.node import WorldNode
+from sensorimotor.worlds.registry import WORLDS, make_world
 
 log = logging.getLogger("sme.world")
 

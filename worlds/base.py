@@ -8,7 +8,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from protocol.messages import Control, Truth, WorldSpec
+from sensorimotor.protocol.messages import Control, Truth, WorldSpec
 
 
 @dataclass(frozen=True)

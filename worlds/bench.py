@@ -6,8 +6,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from protocol.messages import ActionSpace, SensorSpec, WorldSpec
-from worlds.base import StepResult, World, param
+from sensorimotor.protocol.messages import ActionSpace, SensorSpec, WorldSpec
+from sensorimotor.worlds.base import StepResult, World, param
 
 
 class BenchWorld(World):

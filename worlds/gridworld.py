@@ -11,8 +11,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
-from worlds.base import StepResult, World, param
+from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
+from sensorimotor.worlds.base import StepResult, World, param
 
 MOVES4 = ((0, 1), (0, -1), (-1, 0), (1, 0))
 NAMES4 = ("up", "down", "left", "right")

@@ -29,10 +29,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
-from worlds.base import PerturbationError, StepResult, param
-from worlds.mountaincar_dynamics import EVAL_SEED, MountainCarParams, evaluation_states, random_state, step as car_step
-from worlds.vergence import VergenceWorld, verge
+from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
+from sensorimotor.worlds.base import PerturbationError, StepResult, param
+from sensorimotor.worlds.mountaincar_dynamics import EVAL_SEED, MountainCarParams, evaluation_states, random_state, step as car_step
+from sensorimotor.worlds.vergence import VergenceWorld, verge
 
 CONVERGE, DIVERGE, REVERSE, COAST, FORWARD = range(5)
 

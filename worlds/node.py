@@ -17,11 +17,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from protocol import codec, images, keys
-from protocol.bus import Bus, BusMessage
-from protocol.errors import ProtocolError
-from protocol.messages import Action, Control, Observation, WorldSpec
-from worlds.base import PerturbationError, StepResult, World
+from sensorimotor.protocol import codec, images, keys
+from sensorimotor.protocol.bus import Bus, BusMessage
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import Action, Control, Observation, WorldSpec
+from sensorimotor.worlds.base import PerturbationError, StepResult, World
 
 log = logging.getLogger("sme.world")
 
@@ -187,7 +187,7 @@ class WorldNode:
         spec_bytes = codec.encode(self._spec)
         bus = self.bus
         bus.queryable(keys.world_spec(wid), lambda k, p: spec_bytes, codec.schema_name(WorldSpec))
-        from protocol.messages import Truth
+        from sensorimotor.protocol.messages import Truth
         bus.queryable(keys.world_truth(wid), self._answer_truth, codec.schema_name(Truth))
         bus.subscribe(keys.world_act(wid), self._on_action)
         bus.subscribe(keys.world_ctl(wid), self._on_control)

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import Any, Callable, Mapping
 
-from worlds.base import World
+from sensorimotor.worlds.base import World
 
 
 def _gridworld(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from worlds.gridworld import GridWorld
+    from sensorimotor.worlds.gridworld import GridWorld
 
     return GridWorld.from_params(world_id, seed, params)
 
@@ -18,31 +18,31 @@ def _gridworld_barrier(world_id: str, seed: int, params: Mapping[str, Any]) -> W
 
 
 def _retina(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from worlds.retina import RetinaWorld
+    from sensorimotor.worlds.retina import RetinaWorld
 
     return RetinaWorld.from_params(world_id, seed, params)
 
 
 def _vergence(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from worlds.vergence import VergenceWorld
+    from sensorimotor.worlds.vergence import VergenceWorld
 
     return VergenceWorld.from_params(world_id, seed, params)
 
 
 def _mountaincar(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from worlds.mountaincar import MountainCarWorld
+    from sensorimotor.worlds.mountaincar import MountainCarWorld
 
     return MountainCarWorld.from_params(world_id, seed, params)
 
 
 def _stereo(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from worlds.stereo_pair import StereoPairWorld
+    from sensorimotor.worlds.stereo_pair import StereoPairWorld
 
     return StereoPairWorld.from_params(world_id, seed, params)
 
 
 def _bench(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from worlds.bench import BenchWorld
+    from sensorimotor.worlds.bench import BenchWorld
 
     return BenchWorld.from_params(world_id, seed, params)
 

@@ -25,9 +25,9 @@ import numpy as np
 import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
-from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
-from worlds.base import PerturbationError, StepResult, World, param
-from worlds.bullet import disconnect
+from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
+from sensorimotor.worlds.base import PerturbationError, StepResult, World, param
+from sensorimotor.worlds.bullet import disconnect
 
 SCENES = ("spot", "spots", "texture")
 

@@ -18,9 +18,9 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import ndimage
 
-from protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
-from worlds.base import StepResult, World, param
-from worlds.vergence import foveal_difference, verge
+from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
+from sensorimotor.worlds.base import StepResult, World, param
+from sensorimotor.worlds.vergence import foveal_difference, verge
 
 
 def salient_points(img: np.ndarray, disp: np.ndarray, n: int, radius: int, max_shift: int, spacing: int = 25,

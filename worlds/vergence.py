@@ -22,9 +22,9 @@ import pybullet as p
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
-from protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
-from worlds.base import PerturbationError, StepResult, World, param
-from worlds.bullet import disconnect
+from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
+from sensorimotor.worlds.base import PerturbationError, StepResult, World, param
+from sensorimotor.worlds.bullet import disconnect
 
 CONVERGE, DIVERGE = 0, 1
 

@@ -2,10 +2,10 @@
 
 import inspect
 
-from agent.detectors.base import DropDetector, RunningMoments
-from agent.detectors.cusum import CUSUM
-from agent.detectors.moving_average_drop import MovingAverageDrop
-from agent.detectors.page_hinkley import PageHinkley
+from sensorimotor.agent.detectors.base import DropDetector, RunningMoments
+from sensorimotor.agent.detectors.cusum import CUSUM
+from sensorimotor.agent.detectors.moving_average_drop import MovingAverageDrop
+from sensorimotor.agent.detectors.page_hinkley import PageHinkley
 
 DETECTORS = {"cusum": CUSUM, "moving_average": MovingAverageDrop, "page_hinkley": PageHinkley}
 DEFAULT_DETECTOR = "cusum"

@@ -6,7 +6,7 @@ N(0,1) data is about 5e4 steps and a 2-sigma drop is detected in about 7 steps."
 
 from __future__ import annotations
 
-from agent.detectors.base import ReferencedDetector
+from sensorimotor.agent.detectors.base import ReferencedDetector
 
 
 class CUSUM(ReferencedDetector):

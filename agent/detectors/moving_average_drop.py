@@ -8,7 +8,7 @@ from __future__ import annotations
 import collections
 import math
 
-from agent.detectors.base import ReferencedDetector
+from sensorimotor.agent.detectors.base import ReferencedDetector
 
 
 class MovingAverageDrop(ReferencedDetector):

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from agent.detectors.base import DropDetector
+from sensorimotor.agent.detectors.base import DropDetector
 
 
 class PageHinkley(DropDetector):

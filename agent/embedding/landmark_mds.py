@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from agent.embedding.classical_mds import MDSModel, classical_mds
+from sensorimotor.agent.embedding.classical_mds import MDSModel, classical_mds
 
 DistancesTo = Callable[[np.ndarray], np.ndarray]  # landmark indices [m] -> distances [n, m]
 
@@ -70,7 +70,7 @@ def landmark_trace_embedding(traces, k: int = 2, n_landmarks: int = 300, kind: s
                              pad: str = "append", substitution_cost: int = 1, seed: int = 0) -> LandmarkResult:
     """Landmark MDS of action traces; the model then places new traces without re-embedding
     (`trace_cross_distances(new, [traces[i] for i in result.landmarks])` -> `result.model.transform`)."""
-    from agent.embedding.trace_distances import PreparedTraces
+    from sensorimotor.agent.embedding.trace_distances import PreparedTraces
 
     prepared = PreparedTraces(traces, kind, pad, substitution_cost)
     return landmark_mds(len(traces), prepared.distances_to, k, n_landmarks, seed,

@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from agent.embedding import trace_kernels as K
+from sensorimotor.agent.embedding import trace_kernels as K
 
 PADDINGS = ("append", "prepend")
 KINDS = ("continuous", "edit", "dtw")

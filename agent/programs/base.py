@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from protocol.messages import Observation, WorldSpec
+from sensorimotor.protocol.messages import Observation, WorldSpec
 
 
 @dataclass(frozen=True)

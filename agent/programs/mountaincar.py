@@ -31,16 +31,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.embedding import classical_mds, fit_similarity, trace_cross_distances, trace_distances
-from agent.embedding.procrustes import SimilarityTransform
-from agent.learners.kalman_velocity import VelocityFilter
-from agent.learners.lspi import LSPI, RBFBasis
-from agent.learners.sarsa_lambda import SarsaLambda, TileCoder
-from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
-from agent.programs.sweep import StartStateSweep
-from agent.programs.vergence import VergencePractice, foveal_difference
-from protocol.errors import SpecMismatch
-from protocol.messages import Observation, WorldSpec
+from sensorimotor.agent.embedding import classical_mds, fit_similarity, trace_cross_distances, trace_distances
+from sensorimotor.agent.embedding.procrustes import SimilarityTransform
+from sensorimotor.agent.learners.kalman_velocity import VelocityFilter
+from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
+from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.agent.programs.sweep import StartStateSweep
+from sensorimotor.agent.programs.vergence import VergencePractice, foveal_difference
+from sensorimotor.protocol.errors import SpecMismatch
+from sensorimotor.protocol.messages import Observation, WorldSpec
 
 CONVERGE, DIVERGE, REVERSE = 0, 1, 2
 

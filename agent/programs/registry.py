@@ -4,30 +4,30 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from agent.programs.base import EchoProgram, Program
-from protocol.messages import WorldSpec
+from sensorimotor.agent.programs.base import EchoProgram, Program
+from sensorimotor.protocol.messages import WorldSpec
 
 
 def _gridworld(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from agent.programs.gridworld import GridworldProgram
+    from sensorimotor.agent.programs.gridworld import GridworldProgram
 
     return GridworldProgram(spec, seed, **kw)
 
 
 def _retina(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from agent.programs.retina import RetinaProgram
+    from sensorimotor.agent.programs.retina import RetinaProgram
 
     return RetinaProgram(spec, seed, **kw)
 
 
 def _vergence(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from agent.programs.vergence import VergenceProgram
+    from sensorimotor.agent.programs.vergence import VergenceProgram
 
     return VergenceProgram(spec, seed, **kw)
 
 
 def _mountaincar(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from agent.programs.mountaincar import MountainCarProgram
+    from sensorimotor.agent.programs.mountaincar import MountainCarProgram
 
     return MountainCarProgram(spec, seed, **kw)
 

@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.learners.saccade import SaccadeLearner
-from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
-from protocol.errors import SpecMismatch
-from protocol.messages import Observation, WorldSpec
+from sensorimotor.agent.learners.saccade import SaccadeLearner
+from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.protocol.errors import SpecMismatch
+from sensorimotor.protocol.messages import Observation, WorldSpec
 
 
 class RetinaProgram(Program):

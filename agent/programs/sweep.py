@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from agent.programs.base import Decision
-from protocol.messages import Observation
+from sensorimotor.agent.programs.base import Decision
+from sensorimotor.protocol.messages import Observation
 
 
 class StartStateSweep:

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.embedding import classical_mds, trace_distances
-from agent.learners.lspi import LSPI, RBFBasis
-from agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
-from agent.programs.sweep import StartStateSweep
-from protocol.errors import SpecMismatch
-from protocol.messages import Observation, WorldSpec
+from sensorimotor.agent.embedding import classical_mds, trace_distances
+from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
+from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.agent.programs.sweep import StartStateSweep
+from sensorimotor.protocol.errors import SpecMismatch
+from sensorimotor.protocol.messages import Observation, WorldSpec
 
 
 def foveal_difference(obs: Observation) -> float:

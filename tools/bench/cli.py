@@ -8,7 +8,7 @@ import argparse
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmarks (loop, embedding, record, detectors, world)", description="Run a benchmark; see its --help.")
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
-    from tools.bench import detectors, embedding, loop, record, world
+    from sensorimotor.tools.bench import detectors, embedding, loop, record, world
 
     loop.add_parser(bsub)
     embedding.add_parser(bsub)

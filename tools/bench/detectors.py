@@ -11,7 +11,7 @@ from typing import Callable
 
 import numpy as np
 
-from agent.detectors import DEFAULT_DETECTOR, DETECTORS
+from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
 
 
 class _River:
@@ -67,7 +67,7 @@ def synthetic(seeds: int = 100, pre: int = 20000, post: int = 2000, drop: float 
 
 
 def retina_streams(seeds: int, steps: int) -> list[tuple[str, np.ndarray, int]]:
-    from tools.experiments import retina as R
+    from sensorimotor.tools.experiments import retina as R
 
     out = []
     for s in range(seeds):

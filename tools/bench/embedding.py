@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from agent.embedding import (
+from sensorimotor.agent.embedding import (
     classical_mds, landmark_trace_embedding, procrustes_error, trace_distances,
 )
 

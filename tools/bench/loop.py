@@ -18,12 +18,12 @@ import time
 
 import numpy as np
 
-from agent.daemon import AgentDaemon
-from agent.programs.base import EchoProgram
-from protocol.bus import Bus, BusConfig
-from protocol.messages import Observation
-from tools.common import free_port
-from worlds.bench import BenchWorld
+from sensorimotor.agent.daemon import AgentDaemon
+from sensorimotor.agent.programs.base import EchoProgram
+from sensorimotor.protocol.bus import Bus, BusConfig
+from sensorimotor.protocol.messages import Observation
+from sensorimotor.tools.common import free_port
+from sensorimotor.worlds.bench import BenchWorld
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -66,7 +66,7 @@ def over_zenoh(steps: int, obs_bytes: int, timeout: float = 300.0, world_args: t
         th = threading.Thread(target=daemon.run, daemon=True)
         th.start()
         stats_file = os.path.join(tmp, "stats.json")
-        cmd = [sys.executable, "-m", "tools.cli", "world", "bench", "--id", "bench", "--steps", str(steps),
+        cmd = [sys.executable, "-m", "sensorimotor.tools.cli", "world", "bench", "--id", "bench", "--steps", str(steps),
                "--param", f"obs_bytes={obs_bytes}", "--stats-json", stats_file, "--connect", ep, "-q", *world_args]
         proc = subprocess.Popen(cmd, cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
         try:

@@ -14,12 +14,12 @@ import tempfile
 import threading
 import time
 
-from agent.daemon import AgentDaemon
-from protocol import keys
-from protocol.bus import Bus, BusConfig
-from tools.common import free_port
-from tools.mcap_io import read
-from tools.record import Recorder
+from sensorimotor.agent.daemon import AgentDaemon
+from sensorimotor.protocol import keys
+from sensorimotor.protocol.bus import Bus, BusConfig
+from sensorimotor.tools.common import free_port
+from sensorimotor.tools.mcap_io import read
+from sensorimotor.tools.record import Recorder
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -48,7 +48,7 @@ def run(steps: int, obs_bytes: int, timeout: float = 600.0) -> dict:
             f = os.path.join(tmp, f"w{i}.json")
             stats.append(f)
             procs.append(subprocess.Popen(
-                [sys.executable, "-m", "tools.cli", "world", "bench", "--id", f"w{i}", "--steps", str(steps),
+                [sys.executable, "-m", "sensorimotor.tools.cli", "world", "bench", "--id", f"w{i}", "--steps", str(steps),
                  "--param", f"obs_bytes={obs_bytes}", "--stats-json", f, "--connect", ep, "-q"], cwd=root))
         try:
             for p in procs:

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from worlds.registry import WORLDS, make_world
+from sensorimotor.worlds.registry import WORLDS, make_world
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -60,7 +60,7 @@ def raw_frame(px: int = 128, frames: int = 200) -> dict:
 
 
 def main_args(args: argparse.Namespace) -> int:
-    from tools.common import parse_params
+    from sensorimotor.tools.common import parse_params
 
     base = raw_frame()
     rows = [base]

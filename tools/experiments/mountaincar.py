@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from agent.learners.sarsa_lambda import SarsaLambda, TileCoder
-from worlds.mountaincar_dynamics import MountainCarParams, evaluation_states, random_state, step as car_step
+from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, evaluation_states, random_state, step as car_step
 
 
 @dataclass
@@ -28,11 +28,11 @@ def visual(seed: int, train_steps: int, eval_every: int = 10_000, n_eval: int = 
            detector: str | None = None, **program_params: Any) -> DriveResult:
     """The staged program on the rendered robot; optionally the body changes (`morph`) after
     `morph_at` training car steps, with the agent's own detector watching (`detector`)."""
-    from agent.detectors import make_detector
-    from agent.programs.mountaincar import MountainCarProgram
-    from protocol.messages import Control, Embedding
-    from tools.inprocess import run_inprocess
-    from worlds.mountaincar import MountainCarWorld
+    from sensorimotor.agent.detectors import make_detector
+    from sensorimotor.agent.programs.mountaincar import MountainCarProgram
+    from sensorimotor.protocol.messages import Control, Embedding
+    from sensorimotor.tools.inprocess import run_inprocess
+    from sensorimotor.worlds.mountaincar import MountainCarWorld
 
     world = MountainCarWorld(seed=seed, baseline=baseline, vertical=vertical, n_eval=n_eval)
     prog = MountainCarProgram(world.spec(), seed=seed, eval_every=eval_every, **program_params)

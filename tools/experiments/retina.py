@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.detectors import make_detector
-from agent.programs.retina import RetinaProgram
-from protocol.messages import Control, Observation
-from tools.inprocess import InProcessRun, run_inprocess
-from worlds.retina import RetinaWorld
+from sensorimotor.agent.detectors import make_detector
+from sensorimotor.agent.programs.retina import RetinaProgram
+from sensorimotor.protocol.messages import Control, Observation
+from sensorimotor.tools.inprocess import InProcessRun, run_inprocess
+from sensorimotor.worlds.retina import RetinaWorld
 
 EVAL_SEED = 999
 
