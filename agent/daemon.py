@@ -8,7 +8,6 @@ again by a daemon started later.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import pickle
@@ -17,14 +16,14 @@ import threading
 import time
 from typing import Any, Callable
 
+from sensorimotor.agent.attach import AgentConfig, Restored, attach, same_body
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.link import WorldLink
-from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import (
-    Action, AgentEvent, AgentStatus, Embedding, Truth, WorldSpec,
+    Action, AgentEvent, AgentStatus, Embedding, EventKind, Truth, WorldEvent, WorldSpec,
 )
 
 log = logging.getLogger("sme.agent")
@@ -42,12 +41,13 @@ class AgentDaemon:
         self.threaded_links = threaded_links
         self.agent_id = keys.check_id(agent_id, "agent id")
         self.seed = seed
+        self.config = AgentConfig(self.agent_id, seed, detector, program_params or {})
         self.state_dir = state_dir
         self.checkpoint_every = checkpoint_every
         self.program_params = program_params or {}
         self.on_output = on_output
         self.links: dict[str, WorldLink] = {}
-        self.counters: dict[str, int] = {"unattached": 0, "attach_failed": 0, "bad_truth": 0}
+        self.counters: dict[str, int] = {"unattached": 0, "attach_failed": 0, "bad_truth": 0, "bad_world_event": 0}
         self._changes: queue.Queue[tuple[str, bool]] = queue.Queue()
         self._stop = threading.Event()
         self._started = time.time()
@@ -81,8 +81,9 @@ class AgentDaemon:
         if self.on_output is not None and channel != "act":
             self.on_output(channel, msg)
 
-    def event(self, world_id: str, kind: str, detail: str) -> None:
-        self.publish("event", AgentEvent(self.agent_id, world_id, kind, detail, 0, time.time()))
+    def event(self, world_id: str, kind: str, detail: str, reason: str = "") -> None:
+        """Publish an event about a world that has no link (yet)."""
+        self.publish("event", AgentEvent(self.agent_id, world_id, kind, detail, 0, time.time(), reason=reason))
 
     # bus callbacks (zenoh threads) -----------------------------------------------------------------
     # Observations are answered right in the subscriber callback by default: the lockstep world is
@@ -113,6 +114,18 @@ class AgentDaemon:
             self.counters["bad_truth"] += 1
             log.warning("world %s: bad truth message: %s", link.world_id, e)
 
+    def _on_world_event(self, msg: BusMessage) -> None:
+        link = self.links.get(keys.world_of(msg.key))
+        if link is None:
+            return
+        try:
+            ev = codec.decode(WorldEvent, msg.payload)
+        except ProtocolError as e:
+            self.counters["bad_world_event"] += 1
+            log.warning("world %s: bad world event: %s", link.world_id, e)
+            return
+        link.world_event(ev)
+
     def _status(self, key: str, payload: bytes | None) -> bytes:
         return codec.encode(self.status())
 
@@ -139,7 +152,7 @@ class AgentDaemon:
     def _checkpoint_path(self, wid: str) -> str | None:
         return os.path.join(self.state_dir, f"{wid}.pkl") if self.state_dir else None
 
-    def _load_checkpoint(self, spec: WorldSpec) -> dict | None:
+    def _load_checkpoint(self, spec: WorldSpec) -> Restored | None:
         path = self._checkpoint_path(spec.world_id)
         if not path or not os.path.exists(path):
             return None
@@ -149,12 +162,10 @@ class AgentDaemon:
         except Exception as e:
             log.warning("checkpoint %s unreadable (%s); starting fresh", path, e)
             return None
-        old: WorldSpec = saved["spec"]
-        if (old.kind, old.program, old.sensors, old.action_space) != (spec.kind, spec.program, spec.sensors,
-                                                                       spec.action_space):
+        if not same_body(saved["spec"], spec):
             log.warning("checkpoint %s is for a different world body; starting fresh", path)
             return None
-        return saved
+        return Restored(saved["program"], saved["version"], saved.get("detector"))
 
     def checkpoint(self) -> None:
         if not self.state_dir:
@@ -178,72 +189,49 @@ class AgentDaemon:
             spec = self._fetch(keys.world_spec(wid), WorldSpec)
             if spec is None:
                 raise BusError("no reply to the spec query")
-        except (ValueError, BusError, ProtocolError) as e:
-            self.counters["attach_failed"] += 1
-            log.warning("world %s: cannot attach: %s", wid, e)
-            self.event(wid, "attach_failed", str(e))
+        except ProtocolError as e:
+            self._attach_failed(wid, "bad_spec", e)
+            return
+        except (ValueError, BusError) as e:
+            self._attach_failed(wid, "no_spec", e)
             return
         try:
             truth = self._fetch(keys.world_truth(wid), Truth, tries=1)
         except (BusError, ProtocolError):
             truth = None
-        link = self.links.get(wid)
-        if link is not None and (link.spec.kind, link.spec.sensors, link.spec.action_space) == (
-                spec.kind, spec.sensors, spec.action_space):
-            link.truth = truth or link.truth
-            link.resume(spec)
-            if self.threaded_links:
-                link.start()
-            log.info("world %s is back: resumed at step %d, embedding v%d", wid, link.counters.steps, link.version)
-            self.event(wid, "resumed", f"{spec.kind}: resumed with {link.counters.steps} steps learned")
-            return
-        if link is not None:
-            link.stop()
-        saved = self._load_checkpoint(spec)
+        previous = self.links.get(wid)
+        restored = None if previous is not None and same_body(previous.spec, spec) else self._load_checkpoint(spec)
         try:
-            if saved:
-                program = saved["program"]
-                program.world_restarted()
-            else:
-                program = make_program(spec, self.seed, **self.program_params.get(spec.program or spec.kind, {}))
-        except (ValueError, ProtocolError) as e:
-            self.counters["attach_failed"] += 1
-            log.warning("world %s: no program: %s", wid, e)
-            self.event(wid, "attach_failed", str(e))
+            att = attach(spec, self.config, self.publish, truth=truth, previous=previous, restored=restored)
+        except (ValueError, TypeError, ProtocolError) as e:
+            self._attach_failed(wid, "no_program", e)
             return
-        detector = make_detector(self.detector, **program.detector_params)
-        link = WorldLink(self.agent_id, spec, program, self.publish, detector)
-        link.truth = truth
-        if saved:
-            link.version = saved["version"]
-            link.detector = saved.get("detector") or link.detector
-        self.links[wid] = link
+        if previous is not None and att.link is not previous:
+            previous.stop()
+        self.links[wid] = att.link
         if self.threaded_links:
-            link.start()
-        how = f"restored from checkpoint at embedding v{link.version}" if saved else "new"
-        log.info("world %s attached (%s, program %s, %s)", wid, spec.kind, program.name, how)
-        self.event(wid, "attached", f"{spec.kind} with program {program.name} ({how}); config "
-                   + json.dumps(self.config(spec)))
+            att.link.start()
+        log.info("world %s %s (%s, program %s, step %d, embedding v%d)", wid, att.how, spec.kind,
+                 att.link.program.name, att.link.counters.steps, att.link.version)
 
-    def config(self, spec: WorldSpec) -> dict[str, Any]:
-        """What decides a link's behaviour besides its observations: with it, a recording replays
-        offline into the same embeddings."""
-        name = spec.program or spec.kind
-        return {"seed": self.seed, "detector": self.detector, "program": name,
-                "program_params": self.program_params.get(name, {})}
+    def _attach_failed(self, wid: str, reason: str, e: Exception) -> None:
+        self.counters["attach_failed"] += 1
+        log.warning("world %s: cannot attach: %s", wid, e)
+        self.event(wid, EventKind.ATTACH_FAILED, str(e), reason)
 
     def _detach(self, wid: str) -> None:
         link = self.links.get(wid)
         if link is not None and link.state == "attached":
             link.pause()
             log.info("world %s disappeared: link paused at step %d", wid, link.counters.steps)
-            self.event(wid, "paused", "world vanished; waiting for it to return")
+            link.event(EventKind.PAUSED, "world vanished; waiting for it to return", reason="world_gone")
 
     # main loop ---------------------------------------------------------------------------------
     def start(self) -> None:
         self.bus.queryable(keys.agent_status(self.agent_id), self._status, codec.schema_name(AgentStatus))
         self.bus.subscribe(keys.ALL_OBS, self._on_obs)
         self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
+        self.bus.subscribe(keys.ALL_WORLD_EVENTS, self._on_world_event)
         self.bus.token(keys.alive_agent(self.agent_id))
         self.bus.watch_alive(keys.ALL_ALIVE_WORLDS, self._on_alive, history=True)
 

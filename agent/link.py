@@ -19,7 +19,9 @@ from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOut
 from sensorimotor.protocol import codec
 from sensorimotor.protocol.bus import Inbox
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
-from sensorimotor.protocol.messages import Action, AgentEvent, Embedding, LinkStatus, Observation, Truth, WorldSpec
+from sensorimotor.protocol.messages import (
+    Action, AgentEvent, AttachConfig, Embedding, EventKind, LinkStatus, Observation, Truth, WorldEvent, WorldSpec,
+)
 
 log = logging.getLogger("sme.agent")
 
@@ -45,6 +47,8 @@ class LinkCounters:
     duplicates: int = 0
     stale: int = 0
     rejected: dict[str, int] = field(default_factory=dict)
+    program_errors: int = 0
+    world_events: dict[str, int] = field(default_factory=dict)
     embeddings: int = 0
     drops: int = 0
     reward_mean: float = 0.0
@@ -52,8 +56,11 @@ class LinkCounters:
 
 
 class WorldLink:
+    """The agent's side of one world: see the module docstring."""
+
     REWARD_EMA = 0.01
-    EVENT_RATE = 5.0  # bad-input events per second at most; counters count everything
+    EVENT_RATE = 5.0  # bad-input and error events per second at most; counters count everything
+    MAX_PROGRAM_FAILURES = 20  # consecutive program failures before the link is paused
 
     def __init__(self, agent_id: str, spec: WorldSpec, program: Program, publish: Publish,
                  detector: DropDetector | None = None, inbox_size: int = 256) -> None:
@@ -74,6 +81,7 @@ class WorldLink:
         self._last_action: Action | None = None
         self._event_budget = self.EVENT_RATE
         self._event_clock = time.monotonic()
+        self._failures = 0  # consecutive program failures
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -95,6 +103,7 @@ class WorldLink:
 
     def resume(self, spec: WorldSpec) -> None:
         with self.lock:
+            self._failures = 0
             if spec.session != self.session:
                 self.session = spec.session
                 self._last_step = -1
@@ -110,23 +119,43 @@ class WorldLink:
                 self.handle(msg.payload)
 
     # one observation ---------------------------------------------------------------------------
-    def reject(self, kind: str, detail: str, step: int = 0) -> None:
-        c = self.counters.rejected
-        c[kind] = c.get(kind, 0) + 1
-        log.warning("world %s: rejected input (%s): %s", self.world_id, kind, detail)
+    def _may_event(self) -> bool:
+        """A token bucket: at most EVENT_RATE bad-input/error events (and log lines) per second."""
         now = time.monotonic()
         self._event_budget = min(self.EVENT_RATE, self._event_budget + (now - self._event_clock) * self.EVENT_RATE)
         self._event_clock = now
         if self._event_budget >= 1.0:
             self._event_budget -= 1.0
-            self.event("bad_input", f"{kind}: {detail}", step, {"count": float(c[kind])})
+            return True
+        return False
 
-    def event(self, kind: str, detail: str, step: int = 0, values: dict[str, float] | None = None) -> None:
+    def reject(self, kind: str, detail: str, step: int = 0) -> None:
+        """Count one rejected input of `kind` and report it (rate-limited)."""
+        c = self.counters.rejected
+        c[kind] = c.get(kind, 0) + 1
+        if self._may_event():
+            log.warning("world %s: rejected input (%s): %s", self.world_id, kind, detail)
+            self.event(EventKind.BAD_INPUT, detail, step, {"count": float(c[kind])}, reason=kind)
+
+    def event(self, kind: str, detail: str, step: int = 0, values: dict[str, float] | None = None, *,
+              reason: str = "", config: AttachConfig | None = None) -> None:
+        """Publish an AgentEvent about this world."""
         self.publish("event", AgentEvent(self.agent_id, self.world_id, kind, detail, step, time.time(),
-                                         dict(values or {})))
+                                         dict(values or {}), reason, config))
+
+    def world_event(self, ev: WorldEvent) -> None:
+        """A WorldEvent from this world: counted, and passed on as an agent event (rate-limited)."""
+        c = self.counters.world_events
+        c[ev.kind] = c.get(ev.kind, 0) + 1
+        if self._may_event():
+            log.info("world %s reports %s (%s): %s", self.world_id, ev.kind, ev.reason, ev.detail)
+            self.event(EventKind.WORLD_EVENT, ev.detail, ev.step, {"count": float(c[ev.kind])}, reason=ev.kind)
 
     def handle(self, payload: bytes) -> Action | None:
-        """Decode, check and answer one observation payload; returns the action sent (if any)."""
+        """Decode, check and answer one observation payload; returns the action sent (if any).
+        A paused link answers nothing until `resume`."""
+        if self.state != "attached":
+            return None
         try:
             obs = codec.decode(Observation, payload)
             if obs.world_id != self.world_id:
@@ -154,13 +183,14 @@ class WorldLink:
             return None
         try:
             dec = self.program.act(obs)
+            self._failures = 0
         except ProtocolError as e:
             self.reject(e.kind, str(e), obs.step)
             return None
         except Exception as e:  # a program bug must not kill the link or lose what it learned
-            log.exception("program %s failed on world %s step %d", self.program.name, self.world_id, obs.step)
-            self.event("program_error", f"{type(e).__name__}: {e}", obs.step)
-            dec = Decision(reset=True, start=-1)
+            dec = self._program_failed(e, obs.step)
+            if dec is None:
+                return None
         act = Action(self.world_id, obs.step, tuple(float(v) for v in dec.values), dec.reset, dec.start, time.time())
         self._last_step, self._last_action = obs.step, act
         self.publish("act", act)
@@ -174,12 +204,33 @@ class WorldLink:
             ref = self.detector.reference
             if self.detector.update(perf):
                 c.drops += 1
-                self.event("drop_detected", f"{self.detector.name} saw the reward drop (now {perf:.4g}, "
-                           f"reference {ref:.4g})", obs.step, {"reward": perf, "reference": ref})
+                self.event(EventKind.DROP_DETECTED, f"{self.detector.name} saw the reward drop (now {perf:.4g}, "
+                           f"reference {ref:.4g})", obs.step, {"reward": perf, "reference": ref},
+                           reason=self.detector.name)
                 self.program.on_drop(obs.step)
         for item in self.program.drain():
             self._emit(item)
         return act
+
+    def _program_failed(self, e: Exception, step: int) -> Decision | None:
+        """Count a program failure, report it (rate-limited) and answer with a reset; after
+        MAX_PROGRAM_FAILURES in a row, pause the link instead of failing forever (it resumes when the
+        world returns)."""
+        self.counters.program_errors += 1
+        self._failures += 1
+        if self._may_event():
+            log.error("program %s failed on world %s step %d", self.program.name, self.world_id, step,
+                      exc_info=e)
+            self.event(EventKind.PROGRAM_ERROR, f"{type(e).__name__}: {e}", step,
+                       {"count": float(self.counters.program_errors)}, reason=type(e).__name__)
+        if self._failures >= self.MAX_PROGRAM_FAILURES:
+            self.state = "paused"
+            log.error("world %s: program %s failed %d times in a row; link paused", self.world_id,
+                      self.program.name, self._failures)
+            self.event(EventKind.PAUSED, f"program {self.program.name} failed {self._failures} times in a row; "
+                       "the link waits for the world to return", step, reason="program_errors")
+            return None
+        return Decision(reset=True, start=-1)
 
     def _emit(self, item: Any) -> None:
         if isinstance(item, EmbeddingOutput):
@@ -191,12 +242,12 @@ class WorldLink:
                 self.counters.last_error = err
             emb = Embedding(self.agent_id, self.world_id, self.version, item.trigger, item.ids,
                             np.asarray(item.coordinates, dtype=np.float64), item.eigenvalues, err, item.step,
-                            time.time(), {**item.metrics, **scores})
+                            time.time(), {**item.metrics, **scores}, item.iteration, item.drop_step)
             log.info("world %s: embedding v%d (%s) n=%d error=%s", self.world_id, self.version, item.trigger,
                      len(item.ids), "n/a" if err is None else f"{err:.4f}")
             self.publish("embedding", emb)
         elif isinstance(item, EventOutput):
-            self.event(item.kind, item.detail, item.step, item.values)
+            self.event(item.kind, item.detail, item.step, item.values, reason=item.reason)
 
     def status(self) -> LinkStatus:
         c = self.counters

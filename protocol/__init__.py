@@ -7,13 +7,13 @@ from sensorimotor.protocol.errors import (
     SpecMismatch, UnknownVersion,
 )
 from sensorimotor.protocol.messages import (
-    SCHEMA_VERSION, Action, ActionSpace, AgentEvent, AgentStatus, Control, Embedding, LinkStatus,
-    Observation, SensorSpec, Truth, WorldSpec,
+    SCHEMA_VERSION, Action, ActionSpace, AgentEvent, AgentStatus, AttachConfig, Control, Embedding, EventKind,
+    LinkStatus, Observation, SensorSpec, Trigger, Truth, WorldEvent, WorldEventKind, WorldSpec,
 )
 
 __all__ = [
     "keys", "decode", "encode", "schema_name", "SCHEMA_VERSION", "Action", "ActionSpace",
-    "AgentEvent", "AgentStatus", "Control", "Embedding", "LinkStatus", "Observation", "SensorSpec",
-    "Truth", "WorldSpec", "BadDtype", "MalformedMessage", "NonFiniteValue", "OversizeMessage",
+    "AgentEvent", "AgentStatus", "AttachConfig", "Control", "Embedding", "EventKind", "LinkStatus", "Observation",
+    "SensorSpec", "Trigger", "Truth", "WorldEvent", "WorldEventKind", "WorldSpec", "BadDtype", "MalformedMessage", "NonFiniteValue", "OversizeMessage",
     "ProtocolError", "ShapeMismatch", "SpecMismatch", "UnknownVersion",
 ]

@@ -34,6 +34,7 @@ SCHEMA_NAMES = {
     m.Truth: "sme.v1.Truth",
     m.Embedding: "sme.v1.Embedding",
     m.AgentEvent: "sme.v1.AgentEvent",
+    m.WorldEvent: "sme.v1.WorldEvent",
     m.AgentStatus: "sme.v1.AgentStatus",
 }
 
@@ -158,8 +159,10 @@ def _enc_emb(x: m.Embedding) -> pb.Embedding:
         trigger=x.trigger, ids=list(x.ids), eigenvalues=[float(e) for e in x.eigenvalues],
         has_procrustes=x.procrustes_error is not None,
         procrustes_error=float(x.procrustes_error) if x.procrustes_error is not None else 0.0,
-        step=x.step, timestamp=x.timestamp,
+        step=x.step, timestamp=x.timestamp, iteration=x.iteration,
     )
+    if x.drop_step is not None:
+        p.drop_step = x.drop_step
     _tensor_to_pb("coordinates", np.asarray(x.coordinates, dtype=np.float64), p.coordinates)
     p.metrics.update({k: float(v) for k, v in x.metrics.items()})
     return p
@@ -167,9 +170,18 @@ def _enc_emb(x: m.Embedding) -> pb.Embedding:
 
 def _enc_event(x: m.AgentEvent) -> pb.AgentEvent:
     p = pb.AgentEvent(schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, world_id=x.world_id,
-                      kind=x.kind, detail=x.detail, step=x.step, timestamp=x.timestamp)
+                      kind=x.kind, detail=x.detail, step=x.step, timestamp=x.timestamp, reason=x.reason)
     p.values.update({k: float(v) for k, v in x.values.items()})
+    if x.config is not None:
+        c = x.config
+        p.config.seed, p.config.detector, p.config.program = c.seed, c.detector, c.program
+        p.config.program_params.update({k: str(v) for k, v in c.program_params.items()})
     return p
+
+
+def _enc_world_event(x: m.WorldEvent) -> pb.WorldEvent:
+    return pb.WorldEvent(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, session=x.session, kind=x.kind,
+                         reason=x.reason, detail=x.detail, step=x.step, timestamp=x.timestamp)
 
 
 def _enc_status(x: m.AgentStatus) -> pb.AgentStatus:
@@ -235,12 +247,22 @@ def _dec_emb(p: pb.Embedding) -> m.Embedding:
         agent_id=p.agent_id, world_id=p.world_id, version=p.version, trigger=p.trigger, ids=tuple(p.ids),
         coordinates=coords, eigenvalues=tuple(p.eigenvalues),
         procrustes_error=p.procrustes_error if p.has_procrustes else None, step=p.step,
-        timestamp=p.timestamp, metrics=dict(p.metrics),
+        timestamp=p.timestamp, metrics=dict(p.metrics), iteration=p.iteration,
+        drop_step=p.drop_step if p.HasField("drop_step") else None,
     )
 
 
 def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:
-    return m.AgentEvent(p.agent_id, p.world_id, p.kind, p.detail, p.step, p.timestamp, dict(p.values))
+    config = None
+    if p.HasField("config"):
+        c = p.config
+        config = m.AttachConfig(c.seed, c.detector, c.program, dict(c.program_params))
+    return m.AgentEvent(p.agent_id, p.world_id, p.kind, p.detail, p.step, p.timestamp, dict(p.values), p.reason,
+                        config)
+
+
+def _dec_world_event(p: pb.WorldEvent) -> m.WorldEvent:
+    return m.WorldEvent(p.world_id, p.kind, p.reason, p.detail, p.step, p.session, p.timestamp)
 
 
 def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
@@ -261,6 +283,7 @@ _CODECS: dict[type, tuple[type, Callable[[Any], Any], Callable[[Any], Any]]] = {
     m.Truth: (pb.Truth, _enc_truth, _dec_truth),
     m.Embedding: (pb.Embedding, _enc_emb, _dec_emb),
     m.AgentEvent: (pb.AgentEvent, _enc_event, _dec_event),
+    m.WorldEvent: (pb.WorldEvent, _enc_world_event, _dec_world_event),
     m.AgentStatus: (pb.AgentStatus, _enc_status, _dec_status),
 }
 

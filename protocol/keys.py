@@ -38,6 +38,11 @@ def world_spec(world: str) -> str:
     return f"{PREFIX}/world/{world}/spec"
 
 
+def world_event(world: str) -> str:
+    """WorldEvent messages: what the world reports about itself (e.g. a refused action)."""
+    return f"{PREFIX}/world/{world}/event"
+
+
 def world_image(world: str, camera: str) -> str:
     """Camera frames as foxglove.RawImage, for standard viewers."""
     return f"{PREFIX}/world/{world}/image/{camera}"
@@ -68,6 +73,7 @@ ALL_OBS = f"{PREFIX}/world/*/obs"
 ALL_ALIVE_WORLDS = f"{PREFIX}/alive/world/*"
 ALL_EMBEDDINGS = f"{PREFIX}/agent/*/embedding/*"
 ALL_EVENTS = f"{PREFIX}/agent/*/event/*"
+ALL_WORLD_EVENTS = f"{PREFIX}/world/*/event"
 
 
 def last_chunk(key: str) -> str:

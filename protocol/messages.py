@@ -3,10 +3,45 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
 SCHEMA_VERSION = 1
+
+
+class EventKind(StrEnum):
+    """The `kind` of an AgentEvent (one token on the wire; see protocol/README.md)."""
+
+    ATTACHED = "attached"                  # a link to a world was made; `config` says how
+    ATTACH_FAILED = "attach_failed"        # `reason`: no_spec, bad_spec, no_program, bad_checkpoint, ...
+    PAUSED = "paused"                      # `reason`: world_gone, program_errors
+    RESUMED = "resumed"
+    BAD_INPUT = "bad_input"                # `reason`: the rejection kind (malformed, non_finite, ...)
+    DROP_DETECTED = "drop_detected"        # `reason`: the detector's name
+    RELEARNING = "relearning"
+    RELEARNED = "relearned"
+    PROGRAM_ERROR = "program_error"        # `reason`: the exception's type name
+    POLICY_ITERATION = "policy_iteration"
+    EVALUATION = "evaluation"
+    WORLD_EVENT = "world_event"            # a WorldEvent the agent saw, `reason` = its kind
+
+
+class Trigger(StrEnum):
+    """Why an Embedding version was made (its `trigger`)."""
+
+    RANDOM_POLICY = "random_policy"
+    POLICY_ITERATION = "policy_iteration"  # `iteration` says which
+    PERIODIC = "periodic"
+    RELEARNED = "relearned"                # after a detected drop, at `drop_step`
+
+
+class WorldEventKind(StrEnum):
+    """The `kind` of a WorldEvent."""
+
+    ACTION_REFUSED = "action_refused"      # the world could not apply an action; it reset the episode instead
+    CONTROL_APPLIED = "control_applied"
+    CONTROL_REFUSED = "control_refused"
 
 
 @dataclass(frozen=True)
@@ -112,6 +147,18 @@ class Embedding:
     step: int = 0
     timestamp: float = 0.0
     metrics: dict[str, float] = field(default_factory=dict)
+    iteration: int = 0
+    drop_step: int | None = None
+
+
+@dataclass(frozen=True)
+class AttachConfig:
+    """What decides an agent's behaviour on one world besides its observations."""
+
+    seed: int = 0
+    detector: str = ""
+    program: str = ""
+    program_params: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -123,6 +170,21 @@ class AgentEvent:
     step: int = 0
     timestamp: float = 0.0
     values: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
+    config: AttachConfig | None = None
+
+
+@dataclass(frozen=True)
+class WorldEvent:
+    """Something a world reports about itself (e.g. an action it could not apply)."""
+
+    world_id: str
+    kind: str
+    reason: str = ""
+    detail: str = ""
+    step: int = 0
+    session: str = ""
+    timestamp: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -163,7 +163,7 @@ class Truth(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., tensors: _Optional[_Iterable[_Union[Tensor, _Mapping]]] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ...) -> None: ...
 
 class Embedding(_message.Message):
-    __slots__ = ("schema_version", "agent_id", "world_id", "version", "trigger", "ids", "coordinates", "eigenvalues", "has_procrustes", "procrustes_error", "step", "timestamp", "metrics")
+    __slots__ = ("schema_version", "agent_id", "world_id", "version", "trigger", "ids", "coordinates", "eigenvalues", "has_procrustes", "procrustes_error", "step", "timestamp", "metrics", "iteration", "drop_step")
     class MetricsEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -184,6 +184,8 @@ class Embedding(_message.Message):
     STEP_FIELD_NUMBER: _ClassVar[int]
     TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
     METRICS_FIELD_NUMBER: _ClassVar[int]
+    ITERATION_FIELD_NUMBER: _ClassVar[int]
+    DROP_STEP_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     agent_id: str
     world_id: str
@@ -197,10 +199,31 @@ class Embedding(_message.Message):
     step: int
     timestamp: float
     metrics: _containers.ScalarMap[str, float]
-    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., version: _Optional[int] = ..., trigger: _Optional[str] = ..., ids: _Optional[_Iterable[int]] = ..., coordinates: _Optional[_Union[Tensor, _Mapping]] = ..., eigenvalues: _Optional[_Iterable[float]] = ..., has_procrustes: _Optional[bool] = ..., procrustes_error: _Optional[float] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., metrics: _Optional[_Mapping[str, float]] = ...) -> None: ...
+    iteration: int
+    drop_step: int
+    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., version: _Optional[int] = ..., trigger: _Optional[str] = ..., ids: _Optional[_Iterable[int]] = ..., coordinates: _Optional[_Union[Tensor, _Mapping]] = ..., eigenvalues: _Optional[_Iterable[float]] = ..., has_procrustes: _Optional[bool] = ..., procrustes_error: _Optional[float] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., metrics: _Optional[_Mapping[str, float]] = ..., iteration: _Optional[int] = ..., drop_step: _Optional[int] = ...) -> None: ...
+
+class AttachConfig(_message.Message):
+    __slots__ = ("seed", "detector", "program", "program_params")
+    class ProgramParamsEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: str
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[str] = ...) -> None: ...
+    SEED_FIELD_NUMBER: _ClassVar[int]
+    DETECTOR_FIELD_NUMBER: _ClassVar[int]
+    PROGRAM_FIELD_NUMBER: _ClassVar[int]
+    PROGRAM_PARAMS_FIELD_NUMBER: _ClassVar[int]
+    seed: int
+    detector: str
+    program: str
+    program_params: _containers.ScalarMap[str, str]
+    def __init__(self, seed: _Optional[int] = ..., detector: _Optional[str] = ..., program: _Optional[str] = ..., program_params: _Optional[_Mapping[str, str]] = ...) -> None: ...
 
 class AgentEvent(_message.Message):
-    __slots__ = ("schema_version", "agent_id", "world_id", "kind", "detail", "step", "timestamp", "values")
+    __slots__ = ("schema_version", "agent_id", "world_id", "kind", "detail", "step", "timestamp", "values", "reason", "config")
     class ValuesEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -216,6 +239,8 @@ class AgentEvent(_message.Message):
     STEP_FIELD_NUMBER: _ClassVar[int]
     TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
     VALUES_FIELD_NUMBER: _ClassVar[int]
+    REASON_FIELD_NUMBER: _ClassVar[int]
+    CONFIG_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     agent_id: str
     world_id: str
@@ -224,7 +249,29 @@ class AgentEvent(_message.Message):
     step: int
     timestamp: float
     values: _containers.ScalarMap[str, float]
-    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., values: _Optional[_Mapping[str, float]] = ...) -> None: ...
+    reason: str
+    config: AttachConfig
+    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., values: _Optional[_Mapping[str, float]] = ..., reason: _Optional[str] = ..., config: _Optional[_Union[AttachConfig, _Mapping]] = ...) -> None: ...
+
+class WorldEvent(_message.Message):
+    __slots__ = ("schema_version", "world_id", "session", "kind", "reason", "detail", "step", "timestamp")
+    SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
+    WORLD_ID_FIELD_NUMBER: _ClassVar[int]
+    SESSION_FIELD_NUMBER: _ClassVar[int]
+    KIND_FIELD_NUMBER: _ClassVar[int]
+    REASON_FIELD_NUMBER: _ClassVar[int]
+    DETAIL_FIELD_NUMBER: _ClassVar[int]
+    STEP_FIELD_NUMBER: _ClassVar[int]
+    TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    schema_version: int
+    world_id: str
+    session: str
+    kind: str
+    reason: str
+    detail: str
+    step: int
+    timestamp: float
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., kind: _Optional[str] = ..., reason: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ...) -> None: ...
 
 class LinkStatus(_message.Message):
     __slots__ = ("world_id", "kind", "program", "state", "steps", "episodes", "embedding_version", "reward_mean", "rejected", "last_procrustes_error", "detector_statistic", "drops")

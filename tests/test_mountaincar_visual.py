@@ -16,6 +16,7 @@ from tests.conftest import wait_for
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.mountaincar import COAST, CONVERGE, FORWARD, MountainCarWorld
 from sensorimotor.worlds.mountaincar_dynamics import evaluation_states, step as car_step
+from sensorimotor.protocol.messages import Trigger
 
 
 @pytest.fixture(scope="module")
@@ -104,7 +105,7 @@ def test_relearned_embedding_after_a_body_change_keeps_the_old_coordinates():
         prog.on_drop(0)
         run, _ = drive(w, prog, lambda p: p.phase == "drive")
     new = {i: prog.position(t) for i, t in enumerate(prog.landmarks)}
-    assert run.embeddings[-1].trigger.startswith("relearned")
+    assert run.embeddings[-1].trigger == Trigger.RELEARNED
     span = max(old.values()) - min(old.values())
     assert max(abs(new[i] - old[i]) for i in old) < 0.08 * span  # the same places read the same positions
     assert np.mean([len(t) for t in prog.landmarks]) > 1.25 * old_len  # though every trace got longer
@@ -170,4 +171,4 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
     assert drops and drops[0] > at["morph"], (drops, at)  # no false alarm while it learned
     assert drops[0] - at["morph"] <= 4000, (drops, at)
     relearned = run.embeddings[-1]
-    assert relearned.trigger.startswith("relearned") and relearned.procrustes_error < 0.01  # the new body's angles
+    assert relearned.trigger == Trigger.RELEARNED and relearned.procrustes_error < 0.01  # the new body's angles

@@ -3,6 +3,7 @@
 import numpy as np
 
 from sensorimotor.tools.experiments import retina as R
+from sensorimotor.protocol.messages import Trigger
 
 
 def test_saccades_and_geometry_improve_with_training():
@@ -21,7 +22,8 @@ def test_reversal_is_detected_by_the_agent_relearned_and_reembedded():
     n = R.relearn_episodes(r.rewards, 2000)
     assert n is not None and n <= 2200
     triggers = [e.trigger for e in r.run.embeddings]
-    assert any(t.startswith("relearned after drop") for t in triggers)
+    assert Trigger.RELEARNED in triggers
+    assert all(e.drop_step is not None for e in r.run.embeddings if e.trigger == Trigger.RELEARNED)
     last = r.run.embeddings[-1]
     assert last.procrustes_error < 0.35 and "e_geometry" in last.metrics
 

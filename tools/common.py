@@ -53,7 +53,8 @@ def embedding_dict(e: Embedding, coordinates: bool = False) -> dict[str, Any]:
          "trigger": e.trigger, "n_points": int(e.coordinates.shape[0]),
          "dims": int(e.coordinates.shape[1]) if e.coordinates.ndim == 2 else 1,
          "eigenvalues": [round(v, 6) for v in e.eigenvalues], "procrustes_error": _num(e.procrustes_error),
-         "step": e.step, "timestamp": e.timestamp, "metrics": {k: _num(v) for k, v in e.metrics.items()}}
+         "step": e.step, "timestamp": e.timestamp, "metrics": {k: _num(v) for k, v in e.metrics.items()},
+         "iteration": e.iteration, "drop_step": e.drop_step}
     if coordinates:
         d["ids"] = list(e.ids)
         d["coordinates"] = e.coordinates.tolist()
@@ -61,8 +62,20 @@ def embedding_dict(e: Embedding, coordinates: bool = False) -> dict[str, Any]:
 
 
 def event_dict(e: AgentEvent) -> dict[str, Any]:
-    return {"type": "event", "agent": e.agent_id, "world": e.world_id, "kind": e.kind, "detail": e.detail,
-            "step": e.step, "timestamp": e.timestamp, "values": {k: _num(v) for k, v in e.values.items()}}
+    d = {"type": "event", "agent": e.agent_id, "world": e.world_id, "kind": e.kind, "reason": e.reason,
+         "detail": e.detail, "step": e.step, "timestamp": e.timestamp,
+         "values": {k: _num(v) for k, v in e.values.items()}}
+    if e.config is not None:
+        d["config"] = {"seed": e.config.seed, "detector": e.config.detector, "program": e.config.program,
+                       "program_params": dict(e.config.program_params)}
+    return d
+
+
+def describe_trigger(e: Embedding) -> str:
+    """The trigger with its typed specifics, for people: `policy_iteration 3`, `relearned @1200`."""
+    if e.drop_step is not None:
+        return f"{e.trigger} @{e.drop_step}"
+    return f"{e.trigger} {e.iteration}" if e.iteration else str(e.trigger)
 
 
 def status_dict(s: AgentStatus) -> dict[str, Any]:
@@ -77,7 +90,7 @@ def status_dict(s: AgentStatus) -> dict[str, Any]:
 def format_embedding(e: Embedding) -> str:
     err = "n/a" if e.procrustes_error is None else f"{e.procrustes_error:.4f}"
     eig = " ".join(f"{v:.3g}" for v in e.eigenvalues[:4])
-    return (f"[{e.world_id}] embedding v{e.version:<3} {e.trigger:<22} n={e.coordinates.shape[0]:<4} "
+    return (f"[{e.world_id}] embedding v{e.version:<3} {describe_trigger(e):<22} n={e.coordinates.shape[0]:<4} "
             f"procrustes={err:<7} eig=[{eig}] step={e.step}")
 
 

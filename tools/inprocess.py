@@ -8,13 +8,12 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-import numpy as np
-
+from sensorimotor.agent.attach import AgentConfig, attach
 from sensorimotor.agent.detectors import DropDetector
-from sensorimotor.agent.link import WorldLink
 from sensorimotor.agent.programs.base import Program
 from sensorimotor.protocol.messages import AgentEvent, Control, Embedding, Observation
 from sensorimotor.worlds.base import World
+from sensorimotor.worlds.lockstep import Lockstep
 
 
 @dataclass
@@ -41,8 +40,13 @@ def run_inprocess(world: World, program: Program, steps: int, detector: DropDete
                   stop_when: Callable[[InProcessRun], bool] | None = None,
                   perturb: Callable[[int], Control | None] | None = None,
                   on_step: Callable[[int, Observation], None] | None = None) -> InProcessRun:
-    """`perturb(k)` may return a Control, applied to the world after step k is answered (as a live
-    perturbation arrives between steps); `on_step(k, obs)` sees every observation."""
+    """Run `program` on `world` for `steps` steps through the same attach path and lockstep driver
+    as the daemon and the world node.
+
+    `perturb(k)` may return a Control, applied to the world after step k is answered (as a live
+    perturbation arrives between steps); `on_step(k, obs)` sees every observation. WorldEvents
+    (e.g. a refused action) land in `outputs` too. The run ends early when the link pauses (a
+    program that keeps failing)."""
     run = InProcessRun()
     answers: list[Any] = []
 
@@ -54,33 +58,29 @@ def run_inprocess(world: World, program: Program, steps: int, detector: DropDete
             if on_output:
                 on_output(msg)
 
-    link = WorldLink("inproc", world.spec(), program, publish, detector)
-    link.truth = world.truth()
+    lock = Lockstep(world, world.world_id)
+    link = attach(world.spec(), AgentConfig("inproc"), publish, truth=world.truth(), program=program,
+                  detector=detector).link
     t0 = time.perf_counter()
-    res = world.reset()
-    episode, t, start = 0, 0, -1
     for k in range(steps):
-        obs = Observation(world.world_id, episode, k, t, res.tensors, float(res.reward), bool(res.done), start)
+        obs = lock.observation()
         if on_step:
             on_step(k, obs)
         answers.clear()
         link.answer(obs)
-        act = answers[-1]
+        if not answers:
+            break  # the link paused
         ctl = perturb(k) if perturb is not None else None
         if ctl is not None:
             world.perturb(ctl)
             link.truth = world.truth()
-        if res.done or act.reset:
-            start = act.start if act.reset else -1
-            res = world.reset(start=None if start < 0 else start)
-            episode += 1
-            t = 0
-        else:
-            res = world.step(np.asarray(act.values, dtype=np.float64))
-            t += 1
+        refused = lock.advance(answers[-1])
+        if refused is not None:
+            publish("world_event", refused)
+            link.world_event(refused)
         run.steps += 1
         if stop_when and stop_when(run):
             break
-    run.episodes = episode
+    run.episodes = lock.episode
     run.seconds = time.perf_counter() - t0
     return run

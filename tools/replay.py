@@ -28,14 +28,16 @@ from typing import Any, Iterable
 
 
 
-from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS, make_detector
+from sensorimotor.agent.attach import AgentConfig, attach
+from sensorimotor.agent.detectors import DETECTORS
 from sensorimotor.agent.link import WorldLink
-from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import Action, AgentEvent, Embedding, Observation, Truth, WorldSpec
-from sensorimotor.tools.common import embedding_dict, print_json
+from sensorimotor.protocol.messages import (
+    Action, AgentEvent, AttachConfig, Embedding, EventKind, Observation, Truth, WorldSpec,
+)
+from sensorimotor.tools.common import describe_trigger, embedding_dict, print_json
 from sensorimotor.tools.mcap_io import Record, read
 
 log = logging.getLogger("sme.replay")
@@ -78,9 +80,10 @@ class OfflineResult:
         return same, n
 
 
-def recorded_config(records: Iterable[Record]) -> dict[str, dict[str, Any]]:
-    """The agent configuration per world, from the recorded 'attached' events."""
-    out: dict[str, dict[str, Any]] = {}
+def recorded_config(records: Iterable[Record]) -> dict[str, AttachConfig]:
+    """The configuration the live agent attached each world with (the `config` field of the first
+    recorded `attached` event per world)."""
+    out: dict[str, AttachConfig] = {}
     for rec in records:
         kind, wid, _ = classify(rec.topic)
         if kind == "event" and wid not in out:
@@ -88,18 +91,16 @@ def recorded_config(records: Iterable[Record]) -> dict[str, dict[str, Any]]:
                 ev = codec.decode(AgentEvent, rec.data)
             except ProtocolError:
                 continue
-            if ev.kind == "attached" and "; config " in ev.detail:
-                try:
-                    out[wid] = json.loads(ev.detail.split("; config ", 1)[1])
-                except json.JSONDecodeError:
-                    pass
+            if ev.kind == EventKind.ATTACHED and ev.config is not None:
+                out[wid] = ev.config
     return out
 
 
 def replay_offline(path: str, seed: int | None = None, detector: str | None = None,
                    program_params: dict[str, dict[str, Any]] | None = None, agent_id: str = "offline") -> OfflineResult:
-    """Re-learn a recording without the bus. Settings not given are taken from the recording's
-    'attached' events (what the live agent ran with), else the daemon's defaults."""
+    """Re-learn a recording without the bus, through the daemon's attach path. Settings not given
+    are taken from the recording's `attached` events (what the live agent ran with), else the
+    daemon's defaults."""
     cfg = recorded_config(read(path))
     res = OfflineResult()
 
@@ -118,16 +119,11 @@ def replay_offline(path: str, seed: int | None = None, detector: str | None = No
             except ProtocolError as e:
                 log.warning("bad recorded spec for %s: %s", wid, e)
                 continue
-            if link is not None:
-                link.resume(spec)
-                continue
-            c = cfg.get(wid, {})
-            s = seed if seed is not None else c.get("seed", 0)
-            det = detector or c.get("detector", DEFAULT_DETECTOR)
-            name = spec.program or spec.kind
-            params = (program_params or {}).get(name, c.get("program_params", {}))
-            program = make_program(spec, s, **params)
-            res.links[wid] = WorldLink(agent_id, spec, program, publisher, make_detector(det, **program.detector_params))
+            config = AgentConfig.from_attach(agent_id, cfg.get(wid, AttachConfig()))
+            config = replace(config, seed=config.seed if seed is None else seed,
+                             detector=detector or config.detector,
+                             program_params=config.program_params if program_params is None else program_params)
+            res.links[wid] = attach(spec, config, publisher, truth=link.truth if link else None, previous=link).link
         elif kind == "truth" and link is not None:
             try:
                 link.truth = codec.decode(Truth, rec.data)
@@ -339,7 +335,7 @@ def main_args(args: argparse.Namespace) -> int:
                 print_json(embedding_dict(e))
             else:
                 err = "n/a" if e.procrustes_error is None else f"{e.procrustes_error:.4f}"
-                print(f"[{e.world_id}] embedding v{e.version} ({e.trigger}) n={len(e.ids)} procrustes={err}")
+                print(f"[{e.world_id}] embedding v{e.version} ({describe_trigger(e)}) n={len(e.ids)} procrustes={err}")
             if out:
                 out.write(json.dumps(embedding_dict(e, coordinates=True)) + "\n")
         if out:

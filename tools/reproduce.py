@@ -20,6 +20,7 @@ import time
 from typing import Any, Callable
 
 import numpy as np
+from sensorimotor.protocol.messages import Trigger
 
 
 def _mean_se(x: list[float] | np.ndarray) -> tuple[float, float]:
@@ -162,7 +163,7 @@ def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2)
                             for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")}
     delays = [r["detection_delay"] for r in reversal]
     relearn = [r["relearn_episodes"] for r in reversal]
-    relearned = [any(e["trigger"].startswith("relearned") for e in r["embeddings"]) for r in reversal]
+    relearned = [any(e["trigger"] == Trigger.RELEARNED for e in r["embeddings"]) for r in reversal]
     lines = [
         f"Retina (ch. 4): {runs} seeded runs; mean ± standard error.", "",
         "| measure | ours | dissertation |", "|---|---|---|",
@@ -278,7 +279,7 @@ def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
         pre = [m for s, m in r["curve"] if s <= r["morph_at"]][-2:]
         before = float(np.mean(pre)) if pre else float("nan")
         drops = [d for d in r["drops"] if d >= r["morph_at"]]
-        relearned = [e for e in r["embeddings"] if e["trigger"].startswith("relearned")]
+        relearned = [e for e in r["embeddings"] if e["trigger"] == Trigger.RELEARNED]
         back = next((s for s, m in r["curve"] if s > r["morph_at"] and relearned and s >= relearned[0]["training_steps"]
                      and m <= 1.2 * before), None)
         live.append({"seed": r["seed"], "before": before, "detected_after": (drops[0] - r["morph_at"]) if drops else None,

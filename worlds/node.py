@@ -4,6 +4,8 @@ The node publishes observation k and waits for the Action that answers k; after 
 without one it publishes observation k again, and keeps waiting (forever, or until stopped). It
 declares a liveliness token (discovery), a spec queryable, a truth queryable, and a control
 subscriber; controls are applied between steps on the node's own thread, so worlds need no locks.
+What the world reports about itself (a refused action, an applied or refused control) goes out as
+a WorldEvent on sme/v1/world/{id}/event. The stepping itself is `worlds.lockstep.Lockstep`.
 """
 
 from __future__ import annotations
@@ -20,8 +22,11 @@ import numpy as np
 from sensorimotor.protocol import codec, images, keys
 from sensorimotor.protocol.bus import Bus, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import Action, Control, Observation, WorldSpec
-from sensorimotor.worlds.base import PerturbationError, StepResult, World
+from sensorimotor.protocol.messages import (
+    Action, Control, Observation, Truth, WorldEvent, WorldEventKind, WorldSpec,
+)
+from sensorimotor.worlds.base import PerturbationError, World
+from sensorimotor.worlds.lockstep import Lockstep
 
 log = logging.getLogger("sme.world")
 
@@ -151,24 +156,33 @@ class WorldNode:
                 what = self.world.perturb(ctl)
                 self.stats.controls += 1
                 log.info("world %s: %s", self.world_id, what)
+                self._world_event(WorldEvent(self.world_id, WorldEventKind.CONTROL_APPLIED, ctl.kind, what,
+                                             session=self.session, timestamp=time.time()))
                 self._refresh_truth()
                 if self._truth_bytes is not None:
                     self.bus.put(keys.world_truth(self.world_id), self._truth_bytes, codec.schema_name(type(self.world.truth())))
             except (PerturbationError, ValueError) as e:
                 self._reject("bad_control", f"control {ctl.kind!r}: {e}")
+                self._world_event(WorldEvent(self.world_id, WorldEventKind.CONTROL_REFUSED, ctl.kind, str(e),
+                                             session=self.session, timestamp=time.time()))
 
-    def _publish(self, pub, step: int, episode: int, t: int, res: StepResult, start: int) -> bytes:
+    def _publish(self, pub, lock: Lockstep) -> bytes:
         now = time.time()
-        obs = Observation(self.world_id, episode, step, t, res.tensors, float(res.reward), bool(res.done),
-                          start, now, self.session)
-        data = codec.encode(obs)
+        data = codec.encode(lock.observation(now))
         pub.put(data)
         self.stats.published += 1
-        if self._image_pub is not None and step % self.image_every == 0:
+        if self._image_pub is not None and lock.step % self.image_every == 0:
             frame = self.world.frame()
             if frame is not None:
                 self._image_pub.put(images.encode_image(frame, self.world_id, now))
         return data
+
+    def _world_event(self, ev: WorldEvent) -> None:
+        """Publish what the world reports about itself (best effort: the step loop goes on)."""
+        try:
+            self.bus.put(keys.world_event(self.world_id), codec.encode(ev), codec.schema_name(WorldEvent))
+        except Exception as e:  # noqa: BLE001 - a closing bus must not stop the world's loop
+            log.debug("world %s: event not published: %s", self.world_id, e)
 
     def install_signal_handlers(self) -> None:
         def stop(signum, frame):  # noqa: ARG001
@@ -187,7 +201,6 @@ class WorldNode:
         spec_bytes = codec.encode(self._spec)
         bus = self.bus
         bus.queryable(keys.world_spec(wid), lambda k, p: spec_bytes, codec.schema_name(WorldSpec))
-        from sensorimotor.protocol.messages import Truth
         bus.queryable(keys.world_truth(wid), self._answer_truth, codec.schema_name(Truth))
         bus.subscribe(keys.world_act(wid), self._on_action)
         bus.subscribe(keys.world_ctl(wid), self._on_control)
@@ -199,11 +212,9 @@ class WorldNode:
 
         t0 = time.perf_counter()
         t_warm: float | None = None
-        step, episode, start = 0, 0, -1
-        res = self.world.reset(start=None)
-        t = 0
-        self._slot.expect(step)
-        data = self._publish(pub, step, episode, t, res, start)
+        lock = Lockstep(self.world, wid, self.session)
+        self._slot.expect(lock.step)
+        data = self._publish(pub, lock)
         sent = time.perf_counter()
         while not self.stop_event.is_set():
             act = self._slot.wait(self.resend)
@@ -221,30 +232,15 @@ class WorldNode:
                     t_warm = now
                 self.stats.measured_steps += 1
             self._apply_controls()
-            if res.done or act.reset:
-                start = act.start if act.start >= 0 else -1
-                try:
-                    res = self.world.reset(start=None if start < 0 else start)
-                except ValueError as e:
-                    self._reject("bad_action", str(e))
-                    start = -1
-                    res = self.world.reset(start=None)
-                episode += 1
-                self.stats.episodes += 1
-                t = 0
-            else:
-                try:
-                    res = self.world.step(np.asarray(act.values, dtype=np.float64))
-                    t += 1
-                except ValueError as e:
-                    self._reject("bad_action", f"step {act.step}: {e}")
-                    # keep waiting for a valid answer to the same observation
-                    self._slot.expect(step)
-                    continue
-            step += 1
+            episode = lock.episode
+            refused = lock.advance(act)
+            if refused is not None:
+                self._reject("bad_action", refused.detail)
+                self._world_event(refused)
+            self.stats.episodes += lock.episode - episode
             self.stats.steps += 1
-            self._slot.expect(step)
-            data = self._publish(pub, step, episode, t, res, start)
+            self._slot.expect(lock.step)
+            data = self._publish(pub, lock)
             sent = time.perf_counter()
             if self.max_steps is not None and self.stats.steps >= self.max_steps:
                 break

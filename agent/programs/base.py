@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from sensorimotor.protocol.messages import Observation, WorldSpec
+from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
 
 @dataclass(frozen=True)
@@ -29,21 +29,31 @@ class Decision:
 
 @dataclass(frozen=True)
 class EmbeddingOutput:
-    trigger: str
+    """An embedding a program made; the link scores, versions and publishes it.
+
+    `trigger` is one `Trigger` token; `iteration` and `drop_step` carry its specifics as typed
+    values (never in the text)."""
+
+    trigger: Trigger
     ids: tuple[int, ...]
     coordinates: np.ndarray
     eigenvalues: tuple[float, ...]
     step: int
     metrics: dict[str, float] = field(default_factory=dict)
     absolute: bool = False  # coordinates are in the truth's own units (E_geometry is meaningful)
+    iteration: int = 0
+    drop_step: int | None = None
 
 
 @dataclass(frozen=True)
 class EventOutput:
-    kind: str
+    """An event a program reports about itself: `kind` is an `EventKind`, `detail` is for people."""
+
+    kind: EventKind
     detail: str
     step: int
     values: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
 
 
 class Program(abc.ABC):

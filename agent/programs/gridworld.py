@@ -16,7 +16,7 @@ from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.protocol.errors import SpecMismatch
-from sensorimotor.protocol.messages import Observation, WorldSpec
+from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
 
 class GridworldProgram(Program):
@@ -84,9 +84,10 @@ class GridworldProgram(Program):
         mds = classical_mds(D, self.dims)
         self.version += 1
         reached = self._sweep.rewarded
-        trigger = "random_policy" if self.policy == "random" else f"policy_iteration {self.lspi.iterations}"
+        trigger = Trigger.RANDOM_POLICY if self.policy == "random" else Trigger.POLICY_ITERATION
         self.emit(EmbeddingOutput(
-            trigger=trigger, ids=tuple(range(len(traces))), coordinates=mds.coordinates,
+            trigger=trigger, iteration=0 if self.policy == "random" else self.lspi.iterations,
+            ids=tuple(range(len(traces))), coordinates=mds.coordinates,
             eigenvalues=tuple(float(e) for e in mds.eigenvalues[: min(10, len(mds.eigenvalues))]), step=step,
             metrics={"lspi_iterations": float(self.lspi.iterations), "samples": float(self.lspi.n_samples),
                      "goal_reached_fraction": reached / len(traces),
@@ -106,7 +107,7 @@ class GridworldProgram(Program):
                 self.new_samples = 0
                 if self.policy == "lspi":
                     change = self.lspi.iterate()
-                    self.emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}",
+                    self.emit(EventOutput(EventKind.POLICY_ITERATION, f"LSPI iteration {self.lspi.iterations}",
                                           obs.step, {"weight_change": change,
                                                      "samples": float(self.lspi.n_samples)}))
                 self.phase, self._seen = "embed", set()

@@ -40,7 +40,7 @@ from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOut
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.agent.programs.vergence import VergencePractice, foveal_difference
 from sensorimotor.protocol.errors import SpecMismatch
-from sensorimotor.protocol.messages import Observation, WorldSpec
+from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
 CONVERGE, DIVERGE, REVERSE = 0, 1, 2
 
@@ -153,11 +153,11 @@ class MountainCarProgram(Program):
             self._make_driver(float(coords.min()), float(coords.max()))
         self.landmarks, self._model, self._positions, self._verge = traces, mds.model, {}, {}
         n = len(traces)
-        trigger = (f"relearned after drop at step {self.relearn_at}" if relearned
-                   else f"policy_iteration {self.lspi.iterations}")
         self.emit(EmbeddingOutput(
-            trigger, tuple(range(n)), coords, tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
-            {"lspi_iterations": float(self.lspi.iterations), "mean_trace_length": float(np.mean([len(t) for t in traces]))}))
+            Trigger.RELEARNED if relearned else Trigger.POLICY_ITERATION, tuple(range(n)), coords,
+            tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
+            {"lspi_iterations": float(self.lspi.iterations), "mean_trace_length": float(np.mean([len(t) for t in traces]))},
+            iteration=self.lspi.iterations, drop_step=self.relearn_at if relearned else None))
 
     def position(self, trace: list[int]) -> float:
         """The agent's position: the embedding coordinate of a vergence trace (out of sample)."""
@@ -245,7 +245,7 @@ class MountainCarProgram(Program):
             mean = float(np.mean(self._eval_steps))
             self.curve.append((self.training_steps, mean))
             failed = int(sum(not r for r in self._eval_reached))
-            self.emit(EventOutput("evaluation", f"mean steps to goal {mean:.1f} from {self.n_eval} states after "
+            self.emit(EventOutput(EventKind.EVALUATION, f"mean steps to goal {mean:.1f} from {self.n_eval} states after "
                                   f"{self.training_steps} training steps", obs.step,
                                   {"steps_to_goal": mean, "training_steps": float(self.training_steps),
                                    "failures": float(failed)}))
@@ -301,7 +301,7 @@ class MountainCarProgram(Program):
         self._verge = {}
         self.practice.reset()
         self.phase, self._explore_len = "explore", 0
-        self.emit(EventOutput("relearning", "vergence policy relearned from scratch, then re-embedded", step))
+        self.emit(EventOutput(EventKind.RELEARNING, "vergence policy relearned from scratch, then re-embedded", step))
 
     def world_restarted(self) -> None:
         self.practice.reset()

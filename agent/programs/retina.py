@@ -18,7 +18,7 @@ import numpy as np
 from sensorimotor.agent.learners.saccade import SaccadeLearner
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.protocol.errors import SpecMismatch
-from sensorimotor.protocol.messages import Observation, WorldSpec
+from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
 
 class RetinaProgram(Program):
@@ -51,7 +51,7 @@ class RetinaProgram(Program):
             raise SpecMismatch(f"expected {self.n} fields, got {f.size}")
         return f
 
-    def embedding(self, trigger: str, step: int) -> EmbeddingOutput:
+    def embedding(self, trigger: Trigger, step: int, drop_step: int | None = None) -> EmbeddingOutput:
         """Fields that have not yet been lit (summed activation < min_experience) still hold their
         random initial preference: they are left out, and n_points says how many are in."""
         ids = np.flatnonzero(self.learner.experience >= self.min_experience)
@@ -63,7 +63,7 @@ class RetinaProgram(Program):
         recent = self._rewards[-self.settle_window:]
         return EmbeddingOutput(trigger, tuple(int(i) for i in ids), X.copy(), tuple(float(e) for e in eig), step,
                                {"episodes": float(self.episodes), "reward_mean": float(np.mean(recent)) if recent else 0.0,
-                                "resets": float(self.learner.resets)}, absolute=True)
+                                "resets": float(self.learner.resets)}, absolute=True, drop_step=drop_step)
 
     def _settled(self) -> bool:
         """Back to 90 % of the reward before the drop, or (when that level is out of reach, as
@@ -93,12 +93,12 @@ class RetinaProgram(Program):
             if len(self._rewards) > 4 * self.settle_window:
                 del self._rewards[: -2 * self.settle_window]
             if self.episodes % self.embed_every == 0:
-                self.emit(self.embedding("periodic", obs.step))
+                self.emit(self.embedding(Trigger.PERIODIC, obs.step))
             if self._drop is not None and self._settled():
-                self.emit(EventOutput("relearned", f"reward settled {self.episodes - self._drop[1]} episodes "
+                self.emit(EventOutput(EventKind.RELEARNED, f"reward settled {self.episodes - self._drop[1]} episodes "
                                       f"after the drop at step {self._drop[0]}", obs.step,
                                       {"episodes": float(self.episodes - self._drop[1])}))
-                self.emit(self.embedding(f"relearned after drop at step {self._drop[0]}", obs.step))
+                self.emit(self.embedding(Trigger.RELEARNED, obs.step, drop_step=self._drop[0]))
                 self.learner.end_relearning()
                 self._drop = None
         self._pre = None
@@ -115,7 +115,7 @@ class RetinaProgram(Program):
         self.learner.reset_estimates()
         before = self._rewards[-2 * self.settle_window:-50] or self._rewards
         self._drop = (step, self.episodes, float(np.mean(before)) if before else 0.0)
-        self.emit(EventOutput("relearning", "reward estimates reset; exploration raised", step))
+        self.emit(EventOutput(EventKind.RELEARNING, "reward estimates reset; exploration raised", step))
 
     def world_restarted(self) -> None:
         self._pre = None

@@ -18,7 +18,7 @@ from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.protocol.errors import SpecMismatch
-from sensorimotor.protocol.messages import Observation, WorldSpec
+from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
 
 def foveal_difference(obs: Observation) -> float:
@@ -55,7 +55,7 @@ class VergencePractice:
             return False
         self.new_samples = 0
         change = self.lspi.iterate()
-        emit(EventOutput("policy_iteration", f"LSPI iteration {self.lspi.iterations}", obs.step, {"weight_change": change}))
+        emit(EventOutput(EventKind.POLICY_ITERATION, f"LSPI iteration {self.lspi.iterations}", obs.step, {"weight_change": change}))
         return True
 
     def choose(self, d: float) -> int:
@@ -104,10 +104,10 @@ class VergenceProgram(Program):
         mds = classical_mds(D, 1)
         n = len(traces)
         self.emit(EmbeddingOutput(
-            f"policy_iteration {self.lspi.iterations}", tuple(range(n)), mds.coordinates,
+            Trigger.POLICY_ITERATION, tuple(range(n)), mds.coordinates,
             tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
             {"lspi_iterations": float(self.lspi.iterations), "policy_success": self._sweep.rewarded / n,
-             "mean_trace_length": float(np.mean([len(t) for t in traces]))}))
+             "mean_trace_length": float(np.mean([len(t) for t in traces]))}, iteration=self.lspi.iterations))
 
     def world_restarted(self) -> None:
         self.practice.reset()

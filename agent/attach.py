@@ -1,0 +1,122 @@
+"""Attaching a world: the one path by which a world spec becomes a running link.
+
+The daemon (live, over the bus), offline replay (from a recording) and the in-process runner
+(tests, reproduce, benchmarks) all attach through `attach`, so they agree on when a returning
+world resumes its old link (`same_body`), which program and detector a new link gets, and what the
+`attached` event says (`AttachConfig`, a typed field that offline replay reads back).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DropDetector, make_detector
+from sensorimotor.agent.link import Publish, WorldLink
+from sensorimotor.agent.programs.base import Program
+from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.protocol import keys
+from sensorimotor.protocol.messages import AttachConfig, EventKind, Truth, WorldSpec
+
+
+def same_body(a: WorldSpec, b: WorldSpec) -> bool:
+    """Whether what was learned on a world with spec `a` still applies to one with spec `b`: the
+    same kind, program, sensors and action space (ids, sessions and parameters may differ)."""
+    return (a.kind, a.program, a.sensors, a.action_space) == (b.kind, b.program, b.sensors, b.action_space)
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """What decides an agent's behaviour besides its observations.
+
+    Parameters
+    ----------
+    agent_id : str
+        Used in key expressions and in every message the agent publishes.
+    seed : int
+        Seed of every program's random generator.
+    detector : str
+        The reward-drop detector run on each link (see `agent.detectors.DETECTORS`).
+    program_params : mapping
+        Per program name, its parameters (as given on the command line or already typed).
+    """
+
+    agent_id: str = keys.DEFAULT_AGENT_ID
+    seed: int = 0
+    detector: str = DEFAULT_DETECTOR
+    program_params: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    def for_spec(self, spec: WorldSpec) -> AttachConfig:
+        """The configuration a link to `spec` runs with, as carried by the `attached` event."""
+        name = program_name(spec)
+        params = self.program_params.get(name, {})
+        return AttachConfig(self.seed, self.detector, name, {k: format_value(v) for k, v in params.items()})
+
+    @classmethod
+    def from_attach(cls, agent_id: str, cfg: AttachConfig) -> "AgentConfig":
+        """The configuration recorded in an `attached` event (offline replay)."""
+        return cls(agent_id, cfg.seed, cfg.detector or DEFAULT_DETECTOR, {cfg.program: dict(cfg.program_params)})
+
+
+def program_name(spec: WorldSpec) -> str:
+    """The program a world asks for: its hint, else its kind."""
+    return spec.program or spec.kind
+
+
+def format_value(value: Any) -> str:
+    """A parameter value as the k=v string it can be parsed back from."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (tuple, list)):
+        return ",".join(format_value(v) for v in value)
+    return str(value)
+
+
+@dataclass(frozen=True)
+class Restored:
+    """A link's learned state read back from a checkpoint."""
+
+    program: Program
+    version: int
+    detector: DropDetector | None
+
+
+@dataclass(frozen=True)
+class Attached:
+    """The result of `attach`: the link and how it came to be (new, restored or resumed)."""
+
+    link: WorldLink
+    how: str
+
+
+def attach(spec: WorldSpec, config: AgentConfig, publish: Publish, *, truth: Truth | None = None,
+           previous: WorldLink | None = None, restored: Restored | None = None,
+           program: Program | None = None, detector: DropDetector | None = None) -> Attached:
+    """Make (or resume) the link for a world that (re)appeared with `spec`.
+
+    A previous link to the same body resumes with everything it learned; otherwise the link starts
+    from `restored` (a checkpoint for the same body), or from `program` and `detector` when the
+    caller built them, or else from the program and detector `config` names. The link publishes an
+    `attached` (or `resumed`) event. Raises ValueError (or ProtocolError) when no program fits.
+    """
+    if previous is not None and same_body(previous.spec, spec):
+        previous.truth = truth or previous.truth
+        previous.resume(spec)
+        previous.event(EventKind.RESUMED, f"{spec.kind}: resumed with {previous.counters.steps} steps learned",
+                       reason="world_returned")
+        return Attached(previous, "resumed")
+    cfg = config.for_spec(spec)
+    how = "new"
+    version = 0
+    if restored is not None and same_body(restored.program.spec, spec):
+        program, detector, version, how = restored.program, restored.detector, restored.version, "restored"
+        program.world_restarted()
+    elif program is None:
+        program = make_program(spec, config.seed, **config.program_params.get(cfg.program, {}))
+        detector = make_detector(config.detector, **program.detector_params)
+    link = WorldLink(config.agent_id, spec, program, publish, detector)
+    link.truth = truth
+    link.version = version
+    link.event(EventKind.ATTACHED, f"{spec.kind} with program {program.name} ({how}"
+               + (f" at embedding v{version})" if how == "restored" else ")"), reason=how, config=cfg)
+    return Attached(link, how)
