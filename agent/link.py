@@ -154,8 +154,6 @@ class WorldLink:
     def handle(self, payload: bytes) -> Action | None:
         """Decode, check and answer one observation payload; returns the action sent (if any).
         A paused link answers nothing until `resume`."""
-        if self.state != "attached":
-            return None
         try:
             obs = codec.decode(Observation, payload)
             if obs.world_id != self.world_id:
@@ -168,7 +166,10 @@ class WorldLink:
             return self.answer(obs)
 
     def answer(self, obs: Observation) -> Action | None:
-        """Run the program on one checked observation and publish its answer and outputs."""
+        """Run the program on one checked observation and publish its answer and outputs. A paused
+        link answers nothing until `resume`."""
+        if self.state != "attached":
+            return None
         if obs.session != self.session:
             self.session = obs.session
             self._last_step = -1

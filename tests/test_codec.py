@@ -6,6 +6,7 @@ import pytest
 from sensorimotor.protocol import codec, errors
 from sensorimotor.protocol import sme_v1_pb2 as pb
 from sensorimotor.protocol.messages import (
+    AttachConfig, WorldEvent,
     Action, ActionSpace, AgentEvent, AgentStatus, Control, Embedding, LinkStatus, Observation, SensorSpec,
     Truth, WorldSpec,
 )
@@ -41,6 +42,12 @@ def test_observation_round_trip_keeps_values_dtypes_and_shapes():
               {"m": 1.5}),
     Embedding("a0", "w", 1, "t", (0, 1), np.zeros((2, 2)), (1.0,), None),
     AgentEvent("a0", "w", "bad_input", "detail", 5, 1.0, {"count": 2.0}),
+    AgentEvent("a0", "w", "bad_input", "detail", 5, 1.0, {"count": 2.0}, "malformed"),
+    AgentEvent("a0", "w", "attached", "", 0, 1.0, {}, "new",
+               AttachConfig(-3, "cusum", "retina", {"embed_every": "500", "rule": "basic"})),
+    Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 0),
+    Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 123456789),
+    WorldEvent("w", "action_refused", "bad_action", "step 3: out of range", 3, "s1", 2.0),
     AgentStatus("a0", 3.5, (LinkStatus("w", "gridworld", "gridworld", "attached", 10, 2, 1, 0.1, {"oversize": 1},
                                        0.02),), {"unattached": 3}, 4.0),
 ])

@@ -13,7 +13,9 @@ import pytest
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol import sme_v1_pb2 as pb
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
-from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Observation
+from sensorimotor.protocol.messages import (
+    AgentEvent, AgentStatus, Control, EventKind, Observation, WorldEventKind,
+)
 from tests.conftest import wait_for
 
 pytestmark = pytest.mark.integration
@@ -106,6 +108,16 @@ def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
     assert ln.rejected == {"malformed": 1, "spec_mismatch": 1, "non_finite": 1, "oversize": 1, "unknown_version": 1}
     steps = ln.steps
     assert wait_for(lambda: link(status(endpoint), "g2").steps > steps + 200, 20)  # still learning
+    # the world reports a control it cannot apply; the agent passes it on, and garbage on the
+    # world's event key is counted, not fatal
+    with Bus(BusConfig.for_role("tool", endpoint)) as bus:
+        bus.subscribe(keys.agent_event("a0", "g2"), lambda m: events.append(codec.decode(AgentEvent, m.payload)))
+        time.sleep(0.5)
+        bus.put(keys.world_ctl("g2"), codec.encode(Control("g2", "nosuch")), codec.schema_name(Control))
+        bus.put(keys.world_event("g2"), b"\x07garbage", "sme.v1.WorldEvent")
+        assert wait_for(lambda: any(e.kind == EventKind.WORLD_EVENT and e.reason == WorldEventKind.CONTROL_REFUSED
+                                    for e in events), 20), events
+    assert wait_for(lambda: (status(endpoint) or AgentStatus("", 0)).counters.get("bad_world_event") == 1, 10)
     assert agent.poll() is None
 
 
