@@ -111,6 +111,8 @@ def attach(spec: WorldSpec, config: AgentConfig, publish: Publish, *, truth: Tru
     if restored is not None and same_body(restored.program.spec, spec):
         program, detector, version, how = restored.program, restored.detector, restored.version, "restored"
         program.world_restarted()
+        if detector is None:
+            detector = make_detector(config.detector, **program.detector_params)
     elif program is None:
         program = make_program(spec, config.seed, **config.program_params.get(cfg.program, {}))
         detector = make_detector(config.detector, **program.detector_params)

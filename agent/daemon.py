@@ -10,15 +10,18 @@ from __future__ import annotations
 
 import logging
 import os
-import pickle
 import queue
 import threading
 import time
 from typing import Any, Callable
 
 from sensorimotor.agent.attach import AgentConfig, Restored, attach, same_body
+from sensorimotor.agent.checkpoint import (
+    Checkpoint, CheckpointError, encode_checkpoint, read_checkpoint, set_aside_checkpoint, write_atomically,
+)
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.link import WorldLink
+from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
@@ -150,38 +153,76 @@ class AgentDaemon:
         return None
 
     def _checkpoint_path(self, wid: str) -> str | None:
-        return os.path.join(self.state_dir, f"{wid}.pkl") if self.state_dir else None
+        return os.path.join(self.state_dir, f"{wid}.ckpt.npz") if self.state_dir else None
 
     def _load_checkpoint(self, spec: WorldSpec) -> Restored | None:
+        """The saved link for this world, or None to start fresh: the program rebuilt from its
+        class params and restored, its embedding version, and the drop detector restored (None: a
+        fresh one). A file that cannot be read or restored is set aside
+        as NAME.bad-<UTC time>, one learned on another body (kind, program, sensors, actions) as
+        NAME.other-body-<UTC time>: its state cannot serve this world, and left in place it would
+        be overwritten by the next checkpoint. Pickles (the old NAME.pkl) are never loaded."""
         path = self._checkpoint_path(spec.world_id)
+        if path and os.path.exists(os.path.join(self.state_dir, f"{spec.world_id}.pkl")):
+            log.warning("world %s: ignoring the old pickle checkpoint %s.pkl (pickles are never loaded)",
+                        spec.world_id, spec.world_id)
         if not path or not os.path.exists(path):
             return None
+
+        def set_aside(why: str, reason: str) -> None:
+            try:
+                aside = set_aside_checkpoint(path, why)
+            except OSError as e:
+                log.warning("checkpoint %s: %s; starting fresh (could not set it aside: %s)", path, reason, e)
+            else:
+                log.warning("checkpoint %s: %s; set aside as %s, starting fresh", path, reason, aside)
+
         try:
-            with open(path, "rb") as f:
-                saved = pickle.load(f)
-        except Exception as e:
-            log.warning("checkpoint %s unreadable (%s); starting fresh", path, e)
+            saved = read_checkpoint(path)
+        except CheckpointError as e:
+            set_aside("bad", f"unreadable ({e})")
             return None
-        if not same_body(saved["spec"], spec):
-            log.warning("checkpoint %s is for a different world body; starting fresh", path)
+        if not saved.same_body(spec):
+            set_aside("other-body", f"learned on a different world body ({saved.kind}, program "
+                      f"{saved.program or saved.kind!r}) than world {spec.world_id} ({spec.kind})")
             return None
-        return Restored(saved["program"], saved["version"], saved.get("detector"))
+        current = self.program_params.get(spec.program or spec.kind, {})
+        if saved.program_params != current:
+            log.warning("checkpoint %s was made with program params %s, not %s: keeping its own (the learned "
+                        "state belongs to them)", path, saved.program_params, current)
+        try:
+            program = make_program(spec, self.seed, **saved.program_params)
+            if type(program).__name__ != saved.program_class:
+                raise ValueError(f"it holds a {saved.program_class}, this world gets a {type(program).__name__}")
+            program.restore(saved.program_state)
+            detector = None
+            if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
+                detector = make_detector(self.detector, **program.detector_params)
+                detector.restore(saved.detector_state)
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError, ProtocolError) as e:
+            set_aside("bad", f"cannot be restored ({type(e).__name__}: {e})")
+            return None
+        return Restored(program, saved.version, detector)
 
     def checkpoint(self) -> None:
+        """Write every link's learned state to STATE_DIR/<world>.ckpt.npz (atomically, no pickle)."""
         if not self.state_dir:
             return
         for wid, link in list(self.links.items()):
             path = self._checkpoint_path(wid)
-            with link.lock:
-                data = pickle.dumps({"spec": link.spec, "program": link.program, "version": link.version,
-                                     "detector": link.detector},
-                                    protocol=pickle.HIGHEST_PROTOCOL)
-            tmp = f"{path}.tmp"
-            with open(tmp, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
+            with link.lock:  # a consistent snapshot (copies): the file is written while the link runs on
+                program, spec = link.program, link.spec
+                ckpt = Checkpoint(
+                    world_id=wid, kind=spec.kind, program=spec.program, sensors=tuple(spec.sensors),
+                    action_space=spec.action_space, version=link.version, program_class=type(program).__name__,
+                    program_params=dict(program.params), program_state=program.state(),
+                    detector_state=link.detector.state() if link.detector is not None else None)
+            try:
+                data = encode_checkpoint(ckpt)
+            except ValueError:  # a program whose state is not arrays and plain values: a bug, not fatal
+                log.exception("world %s: checkpoint not written", wid)
+                continue
+            write_atomically(path, data)
 
     def _attach(self, wid: str) -> None:
         try:

@@ -1,11 +1,13 @@
 """The detector interface: `update(x)` one reward at a time, returning True on the step a drop is
-detected; `statistic` is the current test statistic (for plots); `reset()` forgets everything."""
+detected; `statistic` is the current test statistic (for plots); `reset()` forgets everything;
+`state()` / `restore(state)` save and resume it (the convention of `agent.programs.base`)."""
 
 from __future__ import annotations
 
 import abc
 import collections
 import math
+from typing import Any
 
 
 class DropDetector(abc.ABC):
@@ -38,6 +40,16 @@ class DropDetector(abc.ABC):
 
     @abc.abstractmethod
     def reset(self) -> None: ...
+
+    def state(self) -> dict[str, Any]:
+        """A snapshot of the running statistics; `name` says which detector it belongs to."""
+        return {"name": self.name, "n": self.n, "drift_detected": self.drift_detected}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a detector of the same kind and settings."""
+        if state["name"] != self.name:
+            raise ValueError(f"detector state is for {state['name']!r}, not {self.name!r}")
+        self.n, self.drift_detected = int(state["n"]), bool(state["drift_detected"])
 
 
 class RunningMoments:
@@ -96,6 +108,16 @@ class RunningMoments:
     def z(self, x: float) -> float:
         return (x - self.mean) / self.sd
 
+    def state(self) -> dict[str, Any]:
+        """The moments and the samples still waiting to join (warmup, rate, lag are configuration)."""
+        return {"pending": list(self._pending), "count": self.count, "mean": self.mean, "m2": self._m2,
+                "var": self.var}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        self._pending = collections.deque(float(x) for x in state["pending"])
+        self.count = int(state["count"])
+        self.mean, self._m2, self.var = float(state["mean"]), float(state["m2"]), float(state["var"])
+
 
 class ReferencedDetector(DropDetector):
     """A detector that compares the stream with a lagged reference regime (RunningMoments)."""
@@ -113,3 +135,10 @@ class ReferencedDetector(DropDetector):
     @abc.abstractmethod
     def _clear(self) -> None:
         """Forget the detector's own statistic."""
+
+    def state(self) -> dict[str, Any]:
+        return {**super().state(), "reference": self._ref.state()}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self._ref.restore(state["reference"])

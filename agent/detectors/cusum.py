@@ -6,6 +6,8 @@ N(0,1) data is about 5e4 steps and a 2-sigma drop is detected in about 7 steps."
 
 from __future__ import annotations
 
+from typing import Any
+
 from sensorimotor.agent.detectors.base import ReferencedDetector
 
 
@@ -25,6 +27,13 @@ class CUSUM(ReferencedDetector):
     @property
     def statistic(self) -> float:
         return self._s
+
+    def state(self) -> dict[str, Any]:
+        return {**super().state(), "s": self._s}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self._s = float(state["s"])
 
     def _update(self, x: float) -> bool:
         ref = self._ref

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import collections
 import math
+from typing import Any
 
 from sensorimotor.agent.detectors.base import ReferencedDetector
 
@@ -28,6 +29,14 @@ class MovingAverageDrop(ReferencedDetector):
     @property
     def statistic(self) -> float:
         return self._stat
+
+    def state(self) -> dict[str, Any]:
+        return {**super().state(), "window_values": list(self._buf), "stat": self._stat}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self._buf = collections.deque((float(x) for x in state["window_values"]), maxlen=self.window)
+        self._stat = float(state["stat"])
 
     def _update(self, x: float) -> bool:
         self._buf.append(x)

@@ -6,6 +6,7 @@ sigma is the standard deviation over the warm-up samples."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from sensorimotor.agent.detectors.base import DropDetector
 
@@ -33,6 +34,16 @@ class PageHinkley(DropDetector):
     @property
     def statistic(self) -> float:
         return self._m - self._min
+
+    def state(self) -> dict[str, Any]:
+        return {**super().state(), "count": self._count, "mean": self._mean, "m2": self._m2, "sd": self._sd,
+                "m": self._m, "min": self._min}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self._count = int(state["count"])
+        self._mean, self._m2, self._sd = float(state["mean"]), float(state["m2"]), float(state["sd"])
+        self._m, self._min = float(state["m"]), float(state["min"])
 
     @property
     def reference(self) -> float:

@@ -4,6 +4,8 @@ derives the car's velocity from its learned (embedded) position. The default pro
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
@@ -25,6 +27,18 @@ class VelocityFilter:
         kf.P = np.diag([self.measurement_var, 1.0])
         kf.x = np.array([[0.0 if position is None else float(position)], [0.0]])
         self._kf = kf
+
+    def state(self) -> dict[str, Any]:
+        """The filter's estimate and covariance (its matrices follow from the settings)."""
+        return {"x": self._kf.x.copy(), "P": self._kf.P.copy()}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a filter with the same settings."""
+        x, P = np.array(state["x"], dtype=np.float64), np.array(state["P"], dtype=np.float64)
+        if x.shape != (2, 1) or P.shape != (2, 2):
+            raise ValueError(f"velocity filter state needs x (2, 1) and P (2, 2), got {x.shape} and {P.shape}")
+        self.reset()
+        self._kf.x, self._kf.P = x, P
 
     def update(self, position: float) -> tuple[float, float]:
         """Feed one position measurement; returns the filtered (position, velocity)."""

@@ -8,6 +8,7 @@ Features come from a basis with `k` and `phi(states, actions) -> (n, k)` (dense 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -82,6 +83,25 @@ class LSPI:
         self._done: list[bool] = []
         self.w = np.zeros(self.basis.k)
         self.iterations = 0
+
+    def state(self) -> dict[str, Any]:
+        """The stored samples, weights and iteration count (the basis and settings are configuration)."""
+        return {"s": np.array(self._s), "a": np.array(self._a, dtype=np.int64), "r": np.array(self._r, dtype=np.float64),
+                "s_next": np.array(self._s2), "done": np.array(self._done, dtype=bool), "w": self.w.copy(),
+                "iterations": self.iterations}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of an LSPI with the same basis."""
+        w = np.array(state["w"], dtype=np.float64)
+        if w.shape != (self.basis.k,):
+            raise ValueError(f"LSPI weights have shape {w.shape}, the basis needs ({self.basis.k},)")
+        cols = [np.asarray(state[k]) for k in ("s", "a", "r", "s_next", "done")]
+        if len({c.size for c in cols}) != 1 or cols[0].size > self.capacity:
+            raise ValueError("LSPI sample columns differ in length or exceed the capacity")
+        # back to the Python lists learn_one appends to (ints stay ints, floats floats)
+        self._s, self._a, self._r, self._s2, self._done = (c.reshape(-1).tolist() for c in cols)
+        self.w = w
+        self.iterations = int(state["iterations"])
 
     @property
     def n_samples(self) -> int:

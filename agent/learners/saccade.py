@@ -20,7 +20,11 @@ The learned geometry is -pi_k: the position of field k in motor units.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+
+from sensorimotor.agent.snapshot import rng_state, set_rng_state
 
 RULES = ("basic", "robust")
 EXPLORATION = ("relearn", "gamma", "gaussian")
@@ -65,6 +69,25 @@ class SaccadeLearner:
         self.updates = 0
         self.resets = 0
         self.relearning = False
+
+    def state(self) -> dict[str, Any]:
+        """Preferences, reward estimates, experience, exploration reference and the generator."""
+        return {"seed": self.seed, "rng": rng_state(self.rng), "pi": self.pi.copy(), "R": self.R.copy(),
+                "experience": self.experience.copy(), "r_ref": self.r_ref, "updates": self.updates,
+                "resets": self.resets, "relearning": self.relearning}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a learner with the same fields and action box."""
+        pi = np.array(state["pi"], dtype=np.float64)
+        R, experience = np.array(state["R"], dtype=np.float64), np.array(state["experience"], dtype=np.float64)
+        if pi.shape != self.pi.shape or R.shape != self.R.shape or experience.shape != self.experience.shape:
+            raise ValueError(f"saccade learner state is for {pi.shape[0]} fields, this learner has {self.n_fields}")
+        self.seed = int(state["seed"])
+        set_rng_state(self.rng, state["rng"])
+        self.pi, self.R, self.experience = pi, R, experience
+        self.r_ref = float(state["r_ref"])
+        self.updates, self.resets = int(state["updates"]), int(state["resets"])
+        self.relearning = bool(state["relearning"])
 
     def reset_estimates(self) -> None:
         """After a large drop (lesion, reversal): forget the reward estimates so exploration rises."""

@@ -7,7 +7,11 @@ eligibility traces; epsilon-greedy; step size alpha / n_tilings per tile.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+
+from sensorimotor.agent.snapshot import rng_state, set_rng_state
 
 
 class TileCoder:
@@ -47,6 +51,19 @@ class SarsaLambda:
         self.rng = np.random.default_rng(self.seed)
         self.w = np.zeros((self.n_actions, self.coder.size))
         self.z = np.zeros_like(self.w)
+
+    def state(self) -> dict[str, Any]:
+        """Weights, eligibility traces and the generator (the tile coder and settings are configuration)."""
+        return {"seed": self.seed, "rng": rng_state(self.rng), "w": self.w.copy(), "z": self.z.copy()}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a learner with the same tile coder and actions."""
+        w, z = np.array(state["w"], dtype=np.float64), np.array(state["z"], dtype=np.float64)
+        if w.shape != self.w.shape or z.shape != self.w.shape:
+            raise ValueError(f"Sarsa weights have shape {w.shape}, this learner needs {self.w.shape}")
+        self.seed = int(state["seed"])
+        set_rng_state(self.rng, state["rng"])
+        self.w, self.z = w, z
 
     def q(self, state: np.ndarray) -> np.ndarray:
         return self.w[:, self.coder.active(state)].sum(axis=1)

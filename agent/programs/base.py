@@ -5,6 +5,25 @@ A program answers every observation with exactly one Decision, handles one obser
 owns its random generator, and never looks at ground truth (the link scores embeddings). Programs
 are deterministic given their seed and the observation stream, so a recording replayed offline
 gives the same embeddings.
+
+Saved state (checkpoints) - one convention for every stateful component (programs, learners,
+sweeps, detectors):
+
+- Configuration is not state. A component is first built the ordinary way, from its constructor
+  arguments (a program: `make_program(spec, seed, **params)`, `params` being what it was made with);
+  what it holds that its owner builds later (e.g. the mountain car's driver, made from the first
+  embedding) is rebuilt by that owner from values in the owner's own state.
+- `state() -> dict` returns a snapshot of everything that changes as it runs: a nested dict with
+  str keys (no dots, no leading "__") whose leaves are numpy arrays or plain values (int, float,
+  str, bool, None, and lists/dicts of those). Arrays and lists are copies, so the snapshot stays
+  valid while the component runs on. The random generator's state is included
+  (`rng.bit_generator.state`, a plain dict), so a restored component continues exactly as the
+  original would have.
+- `restore(state) -> None` puts such a snapshot back into a freshly built component of the same
+  configuration (generators are restored in place, so shared ones stay shared). It raises
+  ValueError or KeyError when the snapshot does not fit the configuration.
+
+`sensorimotor.agent.checkpoint` writes these snapshots as arrays plus JSON, never as a pickle.
 """
 
 from __future__ import annotations
@@ -15,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from sensorimotor.agent.snapshot import rng_state, set_rng_state
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
 
@@ -66,6 +86,9 @@ class Program(abc.ABC):
         self.spec = spec
         self.seed = seed
         self.rng = np.random.default_rng(seed)
+        # the keyword parameters it was made with (make_program records them): a checkpoint
+        # rebuilds the program from them before restoring its state
+        self.params: dict[str, Any] = {}
         self._outbox: list[Any] = []
 
     @abc.abstractmethod
@@ -91,10 +114,16 @@ class Program(abc.ABC):
     def on_drop(self, step: int) -> None:
         """The detector saw a drop in `performance`: relearn as the learner prescribes."""
 
-    def __getstate__(self) -> dict:
-        state = self.__dict__.copy()
-        state["_outbox"] = []
-        return state
+    def state(self) -> dict[str, Any]:
+        """A snapshot of what the program learned and where it is (see the module docstring).
+        Subclasses extend the base's dict; outputs not yet drained are not part of it."""
+        return {"seed": self.seed, "rng": rng_state(self.rng)}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a program built with the same spec and params."""
+        self.seed = int(state["seed"])
+        set_rng_state(self.rng, state["rng"])
+        self._outbox = []
 
 
 class EchoProgram(Program):

@@ -9,12 +9,15 @@ distances, classical MDS to 2-D, emit Embedding vN. Error falls as LSPI iterates
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances, update_trace_distances
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
+from sensorimotor.agent.snapshot import array_or_none, tuple_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
@@ -125,6 +128,24 @@ class GridworldProgram(Program):
             self._finish_embedding(obs.step)
             self.phase = "explore"
         return dec
+
+    # saved state ---------------------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        return {**super().state(), "lspi": self.lspi.state(), "phase": self.phase, "new_samples": self.new_samples,
+                "version": self.version, "prev": None if self._prev is None else list(self._prev),
+                "sweep": self._sweep.state(), "seen": sorted(list(p) for p in self._seen),
+                "last_traces": [list(t) for t in self._last_traces], "D": array_or_none(self._D)}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self.lspi.restore(state["lspi"])
+        self.phase, self.new_samples, self.version = str(state["phase"]), int(state["new_samples"]), int(state["version"])
+        self._prev = tuple_or_none(state["prev"])
+        self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
+        self._sweep.restore(state["sweep"])
+        self._seen = {(int(s), int(a)) for s, a in state["seen"]}
+        self._last_traces = [[int(a) for a in t] for t in state["last_traces"]]
+        self._D = array_or_none(state["D"])
 
     def world_restarted(self) -> None:
         self._prev = None

@@ -28,10 +28,12 @@ embedding is put in the old one's coordinates by a similarity fit over the same 
 
 from __future__ import annotations
 
+from typing import Any
 
 import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, fit_similarity, trace_cross_distances, trace_distances
+from sensorimotor.agent.embedding.classical_mds import MDSModel
 from sensorimotor.agent.embedding.procrustes import SimilarityTransform
 from sensorimotor.agent.learners.kalman_velocity import VelocityFilter
 from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
@@ -39,6 +41,7 @@ from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.agent.programs.vergence import VergencePractice, foveal_difference
+from sensorimotor.agent.snapshot import array_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
@@ -177,9 +180,16 @@ class MountainCarProgram(Program):
         margin = 0.1 * (hi - lo)
         vmax = 0.04 * (hi - lo)  # the car crosses its track in no fewer than ~25 steps
         coder = TileCoder([lo - margin, -vmax], [hi + margin, vmax], tiles=a["tiles"], n_tilings=a["n_tilings"])
-        self.sarsa = SarsaLambda(coder, 3, alpha=a["alpha"], gamma=a["gamma"], lam=a["lam"], epsilon=a["epsilon"],
-                                 seed=int(self.rng.integers(2**31)))
-        self._kf = VelocityFilter(measurement_var=self.quantum ** 2 / 12, process_var=self.process_var * self.quantum ** 2)
+        self.sarsa = self._sarsa(coder, int(self.rng.integers(2**31)))
+        self._kf = self._filter()
+
+    def _sarsa(self, coder: TileCoder, seed: int) -> SarsaLambda:
+        a = self._sarsa_args
+        return SarsaLambda(coder, 3, alpha=a["alpha"], gamma=a["gamma"], lam=a["lam"], epsilon=a["epsilon"], seed=seed)
+
+    def _filter(self) -> VelocityFilter:
+        """Measurement noise: a position is quantised to one vergence step (uniform, variance q^2/12)."""
+        return VelocityFilter(measurement_var=self.quantum ** 2 / 12, process_var=self.process_var * self.quantum ** 2)
 
     @property
     def evaluating(self) -> bool:
@@ -302,6 +312,73 @@ class MountainCarProgram(Program):
         self.practice.reset()
         self.phase, self._explore_len = "explore", 0
         self.emit(EventOutput(EventKind.RELEARNING, "vergence policy relearned from scratch, then re-embedded", step))
+
+    # saved state ---------------------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """Everything stage 1 and 2 learned, and where the program is. The driver (tile coder bounds,
+        Sarsa, Kalman filter) exists once the first embedding is made; it is saved with the bounds
+        and seed it was built from, so `restore` rebuilds it the same way."""
+        driver = None
+        if self.sarsa is not None:
+            driver = {"low": self.sarsa.coder.low.copy(), "high": self.sarsa.coder.high.copy(),
+                      "sarsa": self.sarsa.state(), "filter": self._kf.state()}
+        model = None if self._model is None else {"basis": self._model.basis.copy(), "mean_sq": self._model.mean_sq.copy()}
+        align = None if self._align is None else {"scale": self._align.scale, "rotation": self._align.rotation.copy(),
+                                                  "translation": self._align.translation.copy()}
+        return {
+            **super().state(), "lspi": self.lspi.state(), "practice": self.practice.state(), "phase": self.phase,
+            "explore_len": self._explore_len, "sweep": self._sweep.state(),
+            "landmarks": [list(t) for t in self.landmarks], "model": model, "align": align,
+            "coords0": array_or_none(self._coords0),
+            "positions": [[list(k), v] for k, v in self._positions.items()],
+            "verge": [[d, a] for d, a in self._verge.items()], "quantum": self.quantum,
+            "training_steps": self.training_steps, "episodes": self.episodes, "driver": driver,
+            "trace": None if self._trace is None else list(self._trace), "last_drive": self._last_drive,
+            "s": array_or_none(self._s), "a": self._a, "ep_steps": self._ep_steps, "watching": self._watching,
+            "perf": self._perf, "eval_i": self._eval_i, "eval_steps": list(self._eval_steps),
+            "eval_reached": list(getattr(self, "_eval_reached", [])),
+            "curve": [list(c) for c in self.curve], "episode_log": [list(e) for e in self.episode_log],
+            "relearn_at": self.relearn_at,
+        }
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self.lspi.restore(state["lspi"])
+        self.practice.restore(state["practice"])
+        self.phase, self._explore_len = str(state["phase"]), int(state["explore_len"])
+        self._sweep = StartStateSweep(self.n_positions, self.max_trace)
+        self._sweep.restore(state["sweep"])
+        self.landmarks = [[int(a) for a in t] for t in state["landmarks"]]
+        m, al = state["model"], state["align"]
+        self._model = None if m is None else MDSModel(np.array(m["basis"]), np.array(m["mean_sq"]))
+        self._align = None if al is None else SimilarityTransform(float(al["scale"]), np.array(al["rotation"]),
+                                                                  np.array(al["translation"]))
+        self._coords0 = array_or_none(state["coords0"])
+        self._positions = {tuple(int(a) for a in k): float(v) for k, v in state["positions"]}
+        self._verge = {float(d): int(a) for d, a in state["verge"]}
+        self.quantum = float(state["quantum"])
+        self.training_steps, self.episodes = int(state["training_steps"]), int(state["episodes"])
+        driver = state["driver"]
+        if driver is None:
+            self.sarsa, self._kf = None, None
+        else:
+            coder = TileCoder(np.array(driver["low"]), np.array(driver["high"]), tiles=self._sarsa_args["tiles"],
+                              n_tilings=self._sarsa_args["n_tilings"])
+            self.sarsa = self._sarsa(coder, int(driver["sarsa"]["seed"]))
+            self.sarsa.restore(driver["sarsa"])
+            self._kf = self._filter()
+            self._kf.restore(driver["filter"])
+        trace = state["trace"]
+        self._trace = None if trace is None else [int(a) for a in trace]
+        self._last_drive, self._s = bool(state["last_drive"]), array_or_none(state["s"])
+        self._a, self._ep_steps, self._watching = int(state["a"]), int(state["ep_steps"]), bool(state["watching"])
+        self._perf = None if state["perf"] is None else float(state["perf"])
+        self._eval_i = int(state["eval_i"])
+        self._eval_steps = [int(n) for n in state["eval_steps"]]
+        self._eval_reached = [bool(r) for r in state["eval_reached"]]
+        self.curve = [(int(n), float(m)) for n, m in state["curve"]]
+        self.episode_log = [(int(n), int(k)) for n, k in state["episode_log"]]
+        self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
 
     def world_restarted(self) -> None:
         self.practice.reset()

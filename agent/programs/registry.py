@@ -48,4 +48,6 @@ def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
     except KeyError:
         raise ValueError(f"no developmental program {name!r} for world {spec.world_id!r}; "
                          f"known: {', '.join(sorted(PROGRAMS))}") from None
-    return factory(spec, seed, **kw)
+    program = factory(spec, seed, **kw)
+    program.params = dict(kw)  # what a checkpoint rebuilds it from
+    return program

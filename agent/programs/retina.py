@@ -13,10 +13,13 @@ settled publishes an embedding whose trigger names the drop.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sensorimotor.agent.learners.saccade import SaccadeLearner
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.agent.snapshot import array_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 
@@ -116,6 +119,20 @@ class RetinaProgram(Program):
         before = self._rewards[-2 * self.settle_window:-50] or self._rewards
         self._drop = (step, self.episodes, float(np.mean(before)) if before else 0.0)
         self.emit(EventOutput(EventKind.RELEARNING, "reward estimates reset; exploration raised", step))
+
+    def state(self) -> dict[str, Any]:
+        return {**super().state(), "learner": self.learner.state(), "episodes": self.episodes, "version": self.version,
+                "pre": array_or_none(self._pre), "action": array_or_none(self._action),
+                "rewards": list(self._rewards), "drop": None if self._drop is None else list(self._drop)}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self.learner.restore(state["learner"])
+        self.episodes, self.version = int(state["episodes"]), int(state["version"])
+        self._pre, self._action = array_or_none(state["pre"]), array_or_none(state["action"])
+        self._rewards = [float(r) for r in state["rewards"]]
+        drop = state["drop"]
+        self._drop = None if drop is None else (int(drop[0]), int(drop[1]), float(drop[2]))
 
     def world_restarted(self) -> None:
         self._pre = None

@@ -3,7 +3,7 @@ step 2 of the algorithm (ch. 3) that every trace-embedding program shares."""
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Any, Callable
 
 from sensorimotor.agent.programs.base import Decision
 from sensorimotor.protocol.messages import Observation
@@ -44,6 +44,22 @@ class StartStateSweep:
         a = choose(obs, self._trace)
         self._trace.append(a)
         return Decision((float(a),))
+
+    def state(self) -> dict[str, Any]:
+        """Traces so far, the start state and trace in progress (n_starts, max_trace: configuration)."""
+        return {"n_starts": self.n_starts, "max_trace": self.max_trace, "traces": [list(t) for t in self.traces],
+                "rewarded": self.rewarded, "finished": self.finished, "start": self._start,
+                "trace": list(self._trace), "restart": self._restart}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a sweep over as many start states."""
+        if (state["n_starts"], state["max_trace"]) != (self.n_starts, self.max_trace):
+            raise ValueError(f"sweep state is for {state['n_starts']} start states and traces of "
+                             f"{state['max_trace']}, this sweep has {self.n_starts} and {self.max_trace}")
+        self.traces = [[int(a) for a in t] for t in state["traces"]]
+        self.rewarded, self.finished = int(state["rewarded"]), bool(state["finished"])
+        self._start, self._trace = int(state["start"]), [int(a) for a in state["trace"]]
+        self._restart = bool(state["restart"])
 
     def interrupted(self) -> None:
         """The world or the agent restarted: the trace in progress starts again, from a reset."""

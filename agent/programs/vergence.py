@@ -11,6 +11,8 @@ lengths, Eq 7.3), classical MDS to 1-D.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
@@ -57,6 +59,16 @@ class VergencePractice:
         change = self.lspi.iterate()
         emit(EventOutput(EventKind.POLICY_ITERATION, f"LSPI iteration {self.lspi.iterations}", obs.step, {"weight_change": change}))
         return True
+
+    def state(self) -> dict[str, Any]:
+        """Samples since the last iteration and the step awaiting its outcome (the LSPI and the
+        generator belong to the owner, which saves them)."""
+        return {"new_samples": self.new_samples, "prev": None if self._prev is None else list(self._prev)}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        self.new_samples = int(state["new_samples"])
+        prev = state["prev"]
+        self._prev = None if prev is None else (float(prev[0]), int(prev[1]))
 
     def choose(self, d: float) -> int:
         a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
@@ -108,6 +120,18 @@ class VergenceProgram(Program):
             tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
             {"lspi_iterations": float(self.lspi.iterations), "policy_success": self._sweep.rewarded / n,
              "mean_trace_length": float(np.mean([len(t) for t in traces]))}, iteration=self.lspi.iterations))
+
+    def state(self) -> dict[str, Any]:
+        return {**super().state(), "lspi": self.lspi.state(), "practice": self.practice.state(), "phase": self.phase,
+                "sweep": self._sweep.state()}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        super().restore(state)
+        self.lspi.restore(state["lspi"])
+        self.practice.restore(state["practice"])
+        self.phase = str(state["phase"])
+        self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
+        self._sweep.restore(state["sweep"])
 
     def world_restarted(self) -> None:
         self.practice.reset()

@@ -1,0 +1,227 @@
+"""Checkpoint files: one world link's learned state as explicit, versioned arrays and values.
+
+A checkpoint is a single numpy `.npz` file (a zip of `.npy` entries, written with `np.savez`):
+
+- entry `checkpoint.json` (uint8 bytes): UTF-8 JSON with `format` ("sensorimotor-checkpoint"),
+  `format_version` (FORMAT_VERSION) and every plain value - the world body it was learned on, the
+  embedding version, the program class and params, the program and detector state;
+- one entry per numpy array of those states, named by its dotted path (`program_state.lspi.w`);
+  in the JSON the array's place holds `{"__array__": "<entry name>"}`.
+
+It is read with `allow_pickle=False` and holds no pickle: loading a file someone else wrote cannot
+run their code, and renaming a class does not invalidate it (state is plain data, see the
+convention in `sensorimotor.agent.programs.base`). Anything that is not such a file - garbage, a
+truncated write, a pickle, another format or an unknown format version - raises CheckpointError.
+Files are written atomically (temporary file, fsync, os.replace), so a kill leaves the old
+checkpoint or the new one, never half of one.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Any
+
+import numpy as np
+
+from sensorimotor.protocol.messages import ActionSpace, SensorSpec, WorldSpec
+
+FORMAT = "sensorimotor-checkpoint"
+FORMAT_VERSION = 1
+META_ENTRY = "checkpoint.json"
+ARRAY_MARK = "__array__"
+
+
+class CheckpointError(Exception):
+    """A file that is not a checkpoint this code can read (the message says why)."""
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """What a checkpoint holds: the world body the state was learned on (for the same-body check),
+    the link's embedding version, and the program (class name, the params it was made with, its
+    `state()`) and drop detector (`state()`, None without one)."""
+
+    world_id: str
+    kind: str
+    program: str  # the world's program hint (WorldSpec.program), part of the body check
+    sensors: tuple[SensorSpec, ...]
+    action_space: ActionSpace
+    version: int
+    program_class: str
+    program_params: dict[str, Any] = field(default_factory=dict)
+    program_state: dict[str, Any] = field(default_factory=dict)
+    detector_state: dict[str, Any] | None = None
+
+    def same_body(self, spec: WorldSpec) -> bool:
+        """True when `spec` describes the body this state was learned on (kind, program hint,
+        sensors, action space)."""
+        return (self.kind, self.program, tuple(self.sensors), self.action_space) == (
+            spec.kind, spec.program, tuple(spec.sensors), spec.action_space)
+
+
+# encoding ----------------------------------------------------------------------------------------
+def _flatten(value: Any, path: str, arrays: dict[str, np.ndarray]) -> Any:
+    """`value` as JSON-ready plain data, its arrays moved into `arrays` under their dotted path."""
+    if isinstance(value, np.ndarray):
+        if value.dtype.hasobject:
+            raise ValueError(f"{path}: object arrays cannot be saved without pickle")
+        arrays[path] = value
+        return {ARRAY_MARK: path}
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str) or not k or "." in k or k.startswith("__"):
+                raise ValueError(f"{path}: state keys must be non-empty str without '.' or a leading '__', got {k!r}")
+            out[k] = _flatten(v, f"{path}.{k}", arrays)
+        return out
+    if isinstance(value, (list, tuple)):
+        return [_flatten(v, f"{path}.{i}", arrays) for i, v in enumerate(value)]
+    if isinstance(value, np.generic):
+        return _flatten(value.item(), path, arrays)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise ValueError(f"{path}: {type(value).__name__} is not an array or plain value")
+
+
+def encode_checkpoint(ckpt: Checkpoint) -> bytes:
+    """The file's bytes (see the module docstring). Raises ValueError on state that is not arrays
+    and plain values."""
+    arrays: dict[str, np.ndarray] = {}
+    meta = {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "world_id": ckpt.world_id, "kind": ckpt.kind,
+        "program": ckpt.program,
+        "sensors": [{"name": s.name, "dtype": s.dtype, "shape": list(s.shape), "low": s.low, "high": s.high,
+                     "description": s.description} for s in ckpt.sensors],
+        "action_space": {"n": ckpt.action_space.n, "low": list(ckpt.action_space.low),
+                         "high": list(ckpt.action_space.high), "names": list(ckpt.action_space.names)},
+        "version": ckpt.version, "program_class": ckpt.program_class,
+        "program_params": _flatten(ckpt.program_params, "program_params", arrays),
+        "program_state": _flatten(ckpt.program_state, "program_state", arrays),
+        "detector_state": _flatten(ckpt.detector_state, "detector_state", arrays),
+    }
+    text = json.dumps(meta, allow_nan=True, separators=(",", ":")).encode("utf-8")
+    buf = io.BytesIO()
+    np.savez(buf, **{META_ENTRY: np.frombuffer(text, dtype=np.uint8)}, **arrays)
+    return buf.getvalue()
+
+
+def write_atomically(path: str, data: bytes) -> None:
+    """Replace `path` by `data` so that a crash leaves either the old file or the new one."""
+    tmp = f"{path}.tmp"
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    try:  # make the rename itself durable
+        fd = os.open(os.path.dirname(os.path.abspath(path)), os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def set_aside_checkpoint(path: str, why: str) -> str:
+    """Rename a checkpoint that will not be used to PATH.<why>-<UTC time> (so the next checkpoint
+    does not overwrite it and a person can still look at it); returns the new path."""
+    aside = f"{path}.{why}-{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S.%fZ')}"
+    os.replace(path, aside)
+    return aside
+
+
+def write_checkpoint(path: str, ckpt: Checkpoint) -> None:
+    """Write `ckpt` to `path` atomically."""
+    write_atomically(path, encode_checkpoint(ckpt))
+
+
+# decoding ----------------------------------------------------------------------------------------
+def _unflatten(value: Any, arrays: dict[str, np.ndarray]) -> Any:
+    if isinstance(value, dict):
+        if set(value) == {ARRAY_MARK}:
+            try:
+                return arrays[value[ARRAY_MARK]]
+            except (KeyError, TypeError):
+                raise CheckpointError(f"the array {value[ARRAY_MARK]!r} is missing") from None
+        return {k: _unflatten(v, arrays) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_unflatten(v, arrays) for v in value]
+    return value
+
+
+def _require(meta: dict, key: str, kind: type | tuple[type, ...]) -> Any:
+    if key not in meta:
+        raise CheckpointError(f"the entry {key!r} is missing")
+    value = meta[key]
+    if not isinstance(value, kind) or (isinstance(value, bool) and kind is int):
+        raise CheckpointError(f"the entry {key!r} has the wrong type ({type(value).__name__})")
+    return value
+
+
+def decode_checkpoint(data: bytes) -> Checkpoint:
+    """Parse a checkpoint file's bytes; CheckpointError says what is wrong with anything else."""
+    if data[:2] != b"PK":
+        hint = " (a pickle? those are never loaded)" if data[:1] == b"\x80" else ""
+        raise CheckpointError(f"not a checkpoint: not an npz (zip) file{hint}")
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            if META_ENTRY not in npz.files:
+                raise CheckpointError(f"not a sensorimotor checkpoint: no {META_ENTRY} entry")
+            arrays = {name: npz[name] for name in npz.files}
+    except CheckpointError:
+        raise
+    except Exception as e:  # zipfile, npy header, pickled entries, truncation: all unreadable
+        raise CheckpointError(f"unreadable (truncated or corrupt?): {type(e).__name__}: {e}") from None
+    raw = arrays.pop(META_ENTRY)
+    try:
+        if raw.dtype != np.uint8 or raw.ndim != 1:
+            raise ValueError(f"{META_ENTRY} is {raw.dtype}{list(raw.shape)}, not bytes")
+        meta = json.loads(raw.tobytes().decode("utf-8"))
+    except (ValueError, UnicodeDecodeError) as e:
+        raise CheckpointError(f"its {META_ENTRY} entry is not valid JSON: {e}") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise CheckpointError(f"not a sensorimotor checkpoint (format {meta.get('format') if isinstance(meta, dict) else None!r})")
+    version = meta.get("format_version")
+    if version != FORMAT_VERSION:
+        if isinstance(version, int) and not isinstance(version, bool) and version > FORMAT_VERSION:
+            why = "written by a newer sensorimotor"
+        else:
+            why = "an old or unknown format this version cannot read"
+        raise CheckpointError(f"format version {version!r} is not {FORMAT_VERSION}: {why}")
+    try:
+        sensors = tuple(SensorSpec(name=s["name"], dtype=s["dtype"], shape=tuple(s["shape"]), low=s["low"],
+                                   high=s["high"], description=s["description"])
+                        for s in _require(meta, "sensors", list))
+        a = _require(meta, "action_space", dict)
+        action_space = ActionSpace(n=a["n"], low=tuple(a["low"]), high=tuple(a["high"]), names=tuple(a["names"]))
+    except (KeyError, TypeError) as e:
+        raise CheckpointError(f"the world body entries are malformed: {type(e).__name__}: {e}") from None
+    detector = meta.get("detector_state")
+    if detector is not None and not isinstance(detector, dict):
+        raise CheckpointError("the entry 'detector_state' has the wrong type")
+    return Checkpoint(
+        world_id=_require(meta, "world_id", str), kind=_require(meta, "kind", str),
+        program=_require(meta, "program", str), sensors=sensors, action_space=action_space,
+        version=_require(meta, "version", int), program_class=_require(meta, "program_class", str),
+        program_params=_unflatten(_require(meta, "program_params", dict), arrays),
+        program_state=_unflatten(_require(meta, "program_state", dict), arrays),
+        detector_state=None if detector is None else _unflatten(detector, arrays),
+    )
+
+
+def read_checkpoint(path: str) -> Checkpoint:
+    """Load the checkpoint at `path` (no pickle is ever loaded); CheckpointError if it is not one
+    this version can read."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise CheckpointError(f"cannot read: {e}") from None
+    return decode_checkpoint(data)
