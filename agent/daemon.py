@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.link import WorldLink
-from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.agent.programs.registry import check_program_params, make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
@@ -44,7 +44,7 @@ class AgentDaemon:
         self.seed = seed
         self.state_dir = state_dir
         self.checkpoint_every = checkpoint_every
-        self.program_params = program_params or {}
+        self.program_params = check_program_params(program_params)  # fail early, typed values only
         self.on_output = on_output
         self.links: dict[str, WorldLink] = {}
         self.counters: dict[str, int] = {"unattached": 0, "attach_failed": 0, "bad_truth": 0}

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from sensorimotor.protocol.messages import Observation, WorldSpec
+from sensorimotor.protocol.params import parse
 
 
 @dataclass(frozen=True)
@@ -46,8 +47,18 @@ class EventOutput:
     values: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class EchoParams:
+    """The echo program has no parameters."""
+
+
 class Program(abc.ABC):
+    """A developmental program. It declares its hyperparameters once, as a frozen dataclass (see
+    `protocol.params`) named by the class attribute `Params`; its constructor takes
+    `(spec, seed, params=None, **overrides)` and keeps the parsed instance as `self.params`."""
+
     name = "program"
+    Params: ClassVar[type] = EchoParams
     # settings for the daemon's drop detector that suit this program's `performance` stream, e.g. a
     # shorter warm-up for one value per episode than for one per step
     detector_params: dict[str, Any] = {}
@@ -91,6 +102,11 @@ class EchoProgram(Program):
     """Answers every observation with action 0: the baseline for the loop benchmark."""
 
     name = "echo"
+    Params = EchoParams
+
+    def __init__(self, spec: WorldSpec, seed: int = 0, params: EchoParams | None = None, **overrides: Any) -> None:
+        super().__init__(spec, seed)
+        self.params = parse(EchoParams, overrides, name=self.name, base=params)
 
     def act(self, obs: Observation) -> Decision:
         return Decision((0.0,))
