@@ -17,6 +17,7 @@ from sensorimotor.agent.programs.base import Program
 from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.messages import AttachConfig, EventKind, Truth, WorldSpec
+from sensorimotor.protocol.params import format_value
 
 
 def same_body(a: WorldSpec, b: WorldSpec) -> bool:
@@ -61,15 +62,6 @@ class AgentConfig:
 def program_name(spec: WorldSpec) -> str:
     """The program a world asks for: its hint, else its kind."""
     return spec.program or spec.kind
-
-
-def format_value(value: Any) -> str:
-    """A parameter value as the k=v string it can be parsed back from."""
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, (tuple, list)):
-        return ",".join(format_value(v) for v in value)
-    return str(value)
 
 
 @dataclass(frozen=True)

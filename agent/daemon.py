@@ -15,16 +15,17 @@ import threading
 import time
 from typing import Any, Callable
 
-from sensorimotor.agent.attach import AgentConfig, Restored, attach, same_body
+from sensorimotor.agent.attach import AgentConfig, Restored, attach, program_name, same_body
 from sensorimotor.agent.checkpoint import (
     Checkpoint, CheckpointError, encode_checkpoint, read_checkpoint, set_aside_checkpoint, write_atomically,
 )
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.link import WorldLink
-from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.agent.programs.registry import check_program_params, make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.params import as_strings, parse
 from sensorimotor.protocol.messages import (
     Action, AgentEvent, AgentStatus, Embedding, EventKind, Truth, WorldEvent, WorldSpec,
 )
@@ -44,10 +45,10 @@ class AgentDaemon:
         self.threaded_links = threaded_links
         self.agent_id = keys.check_id(agent_id, "agent id")
         self.seed = seed
-        self.config = AgentConfig(self.agent_id, seed, detector, program_params or {})
         self.state_dir = state_dir
         self.checkpoint_every = checkpoint_every
-        self.program_params = program_params or {}
+        self.program_params = check_program_params(program_params)  # fail early, typed values only
+        self.config = AgentConfig(self.agent_id, seed, detector, self.program_params)
         self.on_output = on_output
         self.links: dict[str, WorldLink] = {}
         self.counters: dict[str, int] = {"unattached": 0, "attach_failed": 0, "bad_truth": 0, "bad_world_event": 0}
@@ -186,14 +187,14 @@ class AgentDaemon:
             set_aside("other-body", f"learned on a different world body ({saved.kind}, program "
                       f"{saved.program or saved.kind!r}) than world {spec.world_id} ({spec.kind})")
             return None
-        current = self.program_params.get(spec.program or spec.kind, {})
-        if saved.program_params != current:
-            log.warning("checkpoint %s was made with program params %s, not %s: keeping its own (the learned "
-                        "state belongs to them)", path, saved.program_params, current)
         try:
             program = make_program(spec, self.seed, **saved.program_params)
             if type(program).__name__ != saved.program_class:
                 raise ValueError(f"it holds a {saved.program_class}, this world gets a {type(program).__name__}")
+            wanted = as_strings(parse(type(program.params), self.program_params.get(program_name(spec), {})))
+            if wanted != saved.program_params:
+                log.warning("checkpoint %s was made with program params %s, not %s: keeping its own (the learned "
+                            "state belongs to them)", path, saved.program_params, wanted)
             program.restore(saved.program_state)
             detector = None
             if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
@@ -215,7 +216,7 @@ class AgentDaemon:
                 ckpt = Checkpoint(
                     world_id=wid, kind=spec.kind, program=spec.program, sensors=tuple(spec.sensors),
                     action_space=spec.action_space, version=link.version, program_class=type(program).__name__,
-                    program_params=dict(program.params), program_state=program.state(),
+                    program_params=as_strings(program.params), program_state=program.state(),
                     detector_state=link.detector.state() if link.detector is not None else None)
             try:
                 data = encode_checkpoint(ckpt)

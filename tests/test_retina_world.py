@@ -98,5 +98,5 @@ def test_params_are_validated():
         RetinaWorld(scene="fog")
     from sensorimotor.worlds.registry import make_world
 
-    with pytest.raises(ValueError, match="not a valid int"):
+    with pytest.raises(ValueError, match="is not an int"):
         make_world("retina", params={"layers": "four"})

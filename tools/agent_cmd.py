@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import ast
 import logging
-from typing import Any
 import signal
+import sys
 import threading
+from typing import Any
 
 from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
+from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, program_kind
+from sensorimotor.protocol.params import ParamError, table_text
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.tools.common import add_verbosity, setup_logging, verbosity
@@ -34,7 +36,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "`sme bench detectors`)")
     p.add_argument("--program-param", action="append", metavar="PROGRAM.K=V", default=None,
                    help="a program hyperparameter, repeatable, e.g. retina.embed_every=500, retina.rule=basic, "
-                   "gridworld.samples_per_iteration=200")
+                   "gridworld.samples_per_iteration=200; checked at start-up (see --list-params)")
+    p.add_argument("--list-params", nargs="?", const="", default=None, metavar="PROGRAM",
+                   help="print the programs' hyperparameters (name, type, default, doc) and exit; "
+                   "programs: " + ", ".join(sorted(PROGRAMS)))
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)")
     add_bus_arguments(p, "agent")
     add_verbosity(p)
@@ -42,25 +47,35 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def parse_program_params(items: list[str] | None) -> dict[str, dict[str, Any]]:
-    out: dict[str, dict[str, Any]] = {}
+    """`PROGRAM.KEY=VALUE` items as validated, typed overrides per program (ParamError otherwise:
+    a malformed item, an unknown program or key, a value that is not of the declared type)."""
+    raw: dict[str, dict[str, str]] = {}
     for item in items or []:
         name, _, kv = item.partition(".")
-        key, eq, raw = kv.partition("=")
-        if not name or not key or not eq:
-            raise ValueError(f"--program-param expects PROGRAM.KEY=VALUE, got {item!r}")
-        try:
-            value: Any = ast.literal_eval(raw)
-        except (ValueError, SyntaxError):
-            value = raw
-        out.setdefault(name, {})[key] = value
-    return out
+        key, eq, value = kv.partition("=")
+        if not name.strip() or not key.strip() or not eq:
+            raise ParamError(f"--program-param expects PROGRAM.KEY=VALUE, got {item!r}")
+        raw.setdefault(name.strip(), {})[key.strip()] = value.strip()
+    return check_program_params(raw)
+
+
+def list_params(name: str) -> int:
+    """Print the hyperparameter table of program `name` (every program when empty); exit code."""
+    try:
+        names = [name] if name else sorted(PROGRAMS)
+        tables = [table_text(program_kind(n).params_type(), f"{n}: {program_kind(n).summary}") for n in names]
+    except ParamError as e:
+        print(f"sme agent: {e}", file=sys.stderr)
+        return 2
+    print("\n\n".join(tables))
+    return 0
 
 
 def run_agent(args: argparse.Namespace) -> int:
     try:
         program_params = parse_program_params(args.program_param)
-    except ValueError as e:
-        log.error("%s", e)
+    except ParamError as e:
+        print(f"sme agent: {e}", file=sys.stderr)
         return 2
     cfg = bus_config_from_args(args, "agent")
     try:
@@ -88,5 +103,7 @@ def run_agent(args: argparse.Namespace) -> int:
 
 
 def main_args(args: argparse.Namespace) -> int:
+    if args.list_params is not None:
+        return list_params(args.list_params)
     setup_logging(verbosity(args))
     return run_agent(args)

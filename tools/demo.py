@@ -13,7 +13,8 @@ from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
 from sensorimotor.protocol.messages import AgentEvent, Embedding
-from sensorimotor.tools.common import add_verbosity, format_embedding, format_event, parse_params, setup_logging
+from sensorimotor.protocol.params import assignments
+from sensorimotor.tools.common import add_verbosity, format_embedding, format_event, setup_logging
 from sensorimotor.worlds.node import WorldNode
 from sensorimotor.worlds.registry import WORLDS, make_world
 
@@ -24,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "node connected to it, show each embedding version as it arrives, and print a summary. "
                        "Stops after --seconds, --steps or Ctrl-C.")
     p.add_argument("--world", default="gridworld", help="world to run: " + ", ".join(sorted(WORLDS)))
-    p.add_argument("--param", action="append", metavar="K=V", help="world parameter, repeatable (e.g. barrier=true)")
+    p.add_argument("--param", action="append", metavar="K=V", help="world parameter, repeatable (e.g. barrier=true; see `sme world NAME --list-params`)")
     p.add_argument("--seconds", type=float, default=15.0, help="run time in seconds (default 15)")
     p.add_argument("--steps", type=int, default=None, help="stop after this many world steps (and at most --seconds)")
     p.add_argument("--seed", type=int, default=0, help="seed of world and agent")
@@ -36,12 +37,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def main_args(args: argparse.Namespace) -> int:
     setup_logging(-1 if not args.verbose else args.verbose)
-    params = parse_params(args.param)
     if args.steps is not None and args.steps < 1:
         print("sme demo: --steps must be >= 1", file=sys.stderr)
         return 2
     try:
-        world = make_world(args.world, None, args.seed, params)
+        world = make_world(args.world, None, args.seed, assignments(args.param))
     except ValueError as e:
         print(f"sme demo: {e}", file=sys.stderr)
         return 2

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import sys
 
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from sensorimotor.tools.common import add_verbosity, parse_params, setup_logging, verbosity
+from sensorimotor.protocol.params import ParamError, assignments, table_text
+from sensorimotor.tools.common import add_verbosity, setup_logging, verbosity
 from sensorimotor.worlds.node import WorldNode
-from sensorimotor.worlds.registry import WORLDS, make_world
+from sensorimotor.worlds.registry import WORLDS, make_world, world_kind
 
 log = logging.getLogger("sme.world")
 
@@ -20,10 +22,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "agent's action k (resend after --resend seconds, then keep waiting). The agent "
                        "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ". "
                        "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.")
-    p.add_argument("name", help="world kind: " + ", ".join(sorted(WORLDS)))
+    p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)))
     p.add_argument("--id", default=None, help="world id (default: the world name)")
     p.add_argument("--param", action="append", metavar="K=V",
-                   help="world parameter, repeatable (gridworld: size=9 barrier=true actions=4|8 goal=x,y)")
+                   help="world parameter, repeatable (e.g. gridworld: size=7 barrier=true actions=8 goal=3,3); "
+                   "unknown keys and bad values are refused; see --list-params")
+    p.add_argument("--list-params", action="store_true",
+                   help="print the world's parameters (name, type, default, doc) and exit; without NAME, every world's")
     p.add_argument("--seed", type=int, default=0, help="seed of the world's random generator")
     p.add_argument("--resend", type=float, default=0.5, metavar="S",
                    help="republish an unanswered observation after S seconds (default 0.5)")
@@ -37,10 +42,36 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=main_args)
 
 
-def main_args(args: argparse.Namespace) -> int:
-    setup_logging(verbosity(args))
+def list_params(name: str | None) -> int:
+    """Print the parameter table of world kind `name` (every kind when None); exit code."""
     try:
-        world = make_world(args.name, args.id, args.seed, parse_params(args.param))
+        names = [name] if name else sorted(WORLDS)
+        tables = [table_text(world_kind(n).params_type(), f"{n}: {world_kind(n).summary}") for n in names]
+    except ParamError as e:
+        print(f"sme world: {e}", file=sys.stderr)
+        return 2
+    print("\n\n".join(tables))
+    return 0
+
+
+def main_args(args: argparse.Namespace) -> int:
+    if args.list_params:
+        return list_params(args.name)
+    setup_logging(verbosity(args))
+    if not args.name:
+        print("sme world: a world NAME is required (one of " + ", ".join(sorted(WORLDS)) + ")", file=sys.stderr)
+        return 2
+    try:
+        params = assignments(args.param)
+        world_kind(args.name)
+    except ParamError as e:
+        print(f"sme world: {e}", file=sys.stderr)
+        return 2
+    try:
+        world = make_world(args.name, args.id, args.seed, params)
+    except ParamError as e:
+        print(f"sme world: {e}", file=sys.stderr)
+        return 2
     except ValueError as e:
         log.error("%s", e)
         return 2

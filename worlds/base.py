@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
@@ -23,11 +23,22 @@ class PerturbationError(ValueError):
     """A Control the world cannot apply; the message says why."""
 
 
+@dataclass(frozen=True)
+class NoParams:
+    """A world without parameters."""
+
+
 class World(abc.ABC):
-    """A simulator the agent learns from. Worlds own their random generator (`seed=`)."""
+    """A simulator the agent learns from. Worlds own their random generator (`seed=`).
+
+    A world declares its parameters once, as a frozen dataclass (see `protocol.params`) named by the
+    class attribute `Params`; its constructor takes `(world_id, seed, params=None, **overrides)` and
+    keeps the parsed instance as `self.params`.
+    """
 
     kind: str = "world"
     max_episode_steps: int = 1000
+    Params: ClassVar[type] = NoParams
 
     def __init__(self, world_id: str = "w0", seed: int = 0) -> None:
         self.world_id = world_id
@@ -78,7 +89,8 @@ class World(abc.ABC):
 
 
 def param(params: Mapping[str, Any], name: str, default: Any, cast: type = str) -> Any:
-    """Read a `--param k=v` value with a clear error when it does not parse."""
+    """Read one perturbation (`Control`) parameter with a clear error when it does not parse.
+    World parameters are declared in the world's `Params` dataclass instead."""
     if name not in params:
         return default
     raw = params[name]

@@ -2,30 +2,36 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, WorldSpec
-from sensorimotor.worlds.base import StepResult, World, param
+from sensorimotor.protocol.params import option, parse
+from sensorimotor.worlds.base import StepResult, World
+
+
+@dataclass(frozen=True)
+class BenchWorldParams:
+    """Parameters of the loop-benchmark world."""
+
+    obs_bytes: int = option(16384, "size of the float32 observation, in bytes", min=4)
+    episode_steps: int = option(100, "steps per episode", min=1)
 
 
 class BenchWorld(World):
     kind = "bench"
+    Params = BenchWorldParams
 
-    def __init__(self, world_id: str = "bench", seed: int = 0, obs_bytes: int = 16384,
-                 episode_steps: int = 100) -> None:
+    def __init__(self, world_id: str = "bench", seed: int = 0, params: BenchWorldParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(world_id, seed)
-        if obs_bytes < 4:
-            raise ValueError("obs_bytes must be >= 4")
+        self.params = prm = parse(BenchWorldParams, overrides, name=self.kind, base=params)
+        obs_bytes, episode_steps = prm.obs_bytes, prm.episode_steps
         self.frame = self.rng.random(obs_bytes // 4, dtype=np.float32)
         self.max_episode_steps = episode_steps
         self.t = 0
-
-    @classmethod
-    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "BenchWorld":
-        return cls(world_id, seed, param(params, "obs_bytes", 16384, int),
-                   param(params, "episode_steps", 100, int))
 
     def spec(self) -> WorldSpec:
         return WorldSpec(self.world_id, self.kind, (SensorSpec("frame", "float32", self.frame.shape),),

@@ -7,12 +7,14 @@ places a wall that divides most of the grid (Fig 5.1b). Moves into walls or off 
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
-from sensorimotor.worlds.base import StepResult, World, param
+from sensorimotor.protocol.params import option, parse
+from sensorimotor.worlds.base import StepResult, World
 
 MOVES4 = ((0, 1), (0, -1), (-1, 0), (1, 0))
 NAMES4 = ("up", "down", "left", "right")
@@ -28,16 +30,34 @@ def barrier_cells(size: int) -> set[tuple[int, int]]:
     return {(c - 2, y) for y in range(0, c + 1)} | {(c + 2, y) for y in range(c, size)}
 
 
+@dataclass(frozen=True)
+class GridWorldParams:
+    """Parameters of the gridworld (Fig 5.1)."""
+
+    size: int = option(9, "side of the square grid, in cells", min=3)
+    barrier: bool = option(False, "walls that divide the grid in an S (Fig 5.1b)")
+    actions: int = option(4, "moves: 4 (compass) or 8 (with diagonals)", choices=(4, 8))
+    goal: tuple[int, int] | None = option(None, "goal cell x,y (none: the centre)")
+    max_episode_steps: int = option(100, "steps after which an episode ends without the goal", min=1)
+
+
+@dataclass(frozen=True)
+class BarrierGridWorldParams(GridWorldParams):
+    """Parameters of `gridworld-barrier`: the gridworld with the barrier on by default."""
+
+    barrier: bool = option(True, "walls that divide the grid in an S (Fig 5.1b)")
+
+
 class GridWorld(World):
     kind = "gridworld"
+    Params = GridWorldParams
 
-    def __init__(self, world_id: str = "g0", seed: int = 0, size: int = 9, barrier: bool = False,
-                 actions: int = 4, goal: tuple[int, int] | None = None, max_episode_steps: int = 100) -> None:
+    def __init__(self, world_id: str = "g0", seed: int = 0, params: GridWorldParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(world_id, seed)
-        if size < 3:
-            raise ValueError("size must be >= 3")
-        if actions not in (4, 8):
-            raise ValueError("actions must be 4 or 8")
+        self.params = prm = parse(GridWorldParams, overrides, name=self.kind, base=params)
+        size, barrier, actions, goal = prm.size, prm.barrier, prm.actions, prm.goal
+        max_episode_steps = prm.max_episode_steps
         self.size = size
         self.barrier = barrier
         self.moves = MOVES4 if actions == 4 else MOVES8
@@ -53,19 +73,6 @@ class GridWorld(World):
         self.state_id = np.random.default_rng(10_000 + seed).permutation(len(self.cells)).astype(np.int32)
         self.pos = self.goal
         self.t = 0
-
-    @classmethod
-    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "GridWorld":
-        goal = param(params, "goal", None)
-        if goal is not None:
-            try:
-                gx, gy = (int(v) for v in str(goal).split(","))
-            except ValueError:
-                raise ValueError(f"parameter goal={goal!r}: expected 'x,y'") from None
-            goal = (gx, gy)
-        return cls(world_id, seed, size=param(params, "size", 9, int),
-                   barrier=param(params, "barrier", False, bool), actions=param(params, "actions", 4, int),
-                   goal=goal, max_episode_steps=param(params, "max_episode_steps", 100, int))
 
     def spec(self) -> WorldSpec:
         n = len(self.cells)

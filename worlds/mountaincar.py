@@ -25,26 +25,51 @@ render from the cell's centre), so a position revisited costs no render.
 from __future__ import annotations
 
 import collections
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
-from sensorimotor.worlds.base import PerturbationError, StepResult, param
+from sensorimotor.protocol.params import option, parse
+from sensorimotor.worlds.base import PerturbationError, StepResult
 from sensorimotor.worlds.mountaincar_dynamics import EVAL_SEED, MountainCarParams, evaluation_states, random_state, step as car_step
-from sensorimotor.worlds.vergence import VergenceWorld, verge
+from sensorimotor.worlds.vergence import VergenceWorld, VergenceWorldParams, verge
 
 CONVERGE, DIVERGE, REVERSE, COAST, FORWARD = range(5)
 
 
+@dataclass(frozen=True)
+class MountainCarWorldParams:
+    """Parameters of the visual mountain car (ch. 8)."""
+
+    baseline: float = option(1.0, "distance between the cameras, m (the dissertation also uses 1.4)")
+    vertical: bool = option(False, "cameras one above the other instead of side by side")
+    sign_distance: float = option(3.0, "the stop sign's distance ahead of x = 0, m")
+    track_scale: float = option(1.0, "metres of track per unit of x")
+    n_positions: int = option(20, "sweep start states: evenly spaced track positions at rest", min=2)
+    n_eval: int = option(100, "evaluation start states: fixed random (x, v) drawn with eval_seed", min=0)
+    eval_seed: int = option(EVAL_SEED, "seed of the evaluation states (the same for every world)")
+    fovea: int = option(16, "fovea side, px", min=1)
+    fovea_deg: float = option(12.0, "fovea field of view, degrees")
+    max_vergence: int = option(70, "vergence steps (the eyes' range)", min=2)
+    max_car_steps: int = option(1000, "car steps after which an episode ends", min=1)
+    render_grid: float = option(0.005, "render cache cell, m of track (> 0)")
+    goal_window: int = option(10, "perceptual-goal search, steps either side of the geometric fixation", min=0)
+    cache_size: int = option(60_000, "rendered eye pairs kept in the cache", min=1)
+
+
 class MountainCarWorld(VergenceWorld):
     kind = "mountaincar"
+    Params = MountainCarWorldParams
 
-    def __init__(self, world_id: str = "mountaincar", seed: int = 0, baseline: float = 1.0, vertical: bool = False,
-                 sign_distance: float = 3.0, track_scale: float = 1.0, n_positions: int = 20, n_eval: int = 100,
-                 eval_seed: int = EVAL_SEED, fovea: int = 16, fovea_deg: float = 12.0, max_vergence: int = 70,
-                 max_car_steps: int = 1000, render_grid: float = 0.005, goal_window: int = 10,
-                 cache_size: int = 60_000) -> None:
+    def __init__(self, world_id: str = "mountaincar", seed: int = 0, params: MountainCarWorldParams | None = None,
+                 **overrides: Any) -> None:
+        prm = parse(MountainCarWorldParams, overrides, name=self.kind, base=params)
+        baseline, vertical, sign_distance, track_scale = prm.baseline, prm.vertical, prm.sign_distance, prm.track_scale
+        n_positions, n_eval, eval_seed, fovea, fovea_deg = prm.n_positions, prm.n_eval, prm.eval_seed, prm.fovea, prm.fovea_deg
+        max_vergence, max_car_steps, render_grid = prm.max_vergence, prm.max_car_steps, prm.render_grid
+        goal_window, cache_size = prm.goal_window, prm.cache_size
         self.car = MountainCarParams()
         if track_scale <= 0 or sign_distance - self.car.x_max * track_scale <= 0.2:
             raise ValueError("the sign must stay at least 0.2 m ahead of the robot over the whole track")
@@ -52,9 +77,10 @@ class MountainCarWorld(VergenceWorld):
             raise ValueError("need n_positions >= 2, n_eval >= 0, max_car_steps >= 1, render_grid > 0, max_vergence >= 2")
         self.track_scale, self.render_grid, self.goal_window = track_scale, render_grid, goal_window
         self.max_car_steps, self.n_positions, self.n_eval = max_car_steps, n_positions, n_eval
-        super().__init__(world_id, seed, baseline=baseline, sign_distance=sign_distance, n_starts=n_positions,
-                         nearest=0.5, fovea=fovea, fovea_deg=fovea_deg, max_steps=max_vergence, vertical=vertical,
-                         sign_radius=0.9, room=True)
+        super().__init__(world_id, seed, VergenceWorldParams(
+            baseline=baseline, sign_distance=sign_distance, n_starts=n_positions, nearest=0.5, fovea=fovea,
+            fovea_deg=fovea_deg, max_steps=max_vergence, vertical=vertical, sign_radius=0.9, room=True))
+        self.params = prm
         xs = np.linspace(self.car.x_min, self.car.goal, n_positions + 1)[:-1]
         self.starts = np.vstack([np.c_[xs, np.zeros_like(xs)], evaluation_states(n_eval, eval_seed, self.car)])
         self.distances = self.z_of(self.starts[:, 0])
@@ -64,16 +90,6 @@ class MountainCarWorld(VergenceWorld):
         self._images: collections.OrderedDict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = collections.OrderedDict()
         self._goals: dict[int, int] = {}
         self.renders = 0
-
-    @classmethod
-    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "MountainCarWorld":
-        return cls(world_id, seed, baseline=param(params, "baseline", 1.0, float),
-                   vertical=param(params, "vertical", False, bool),
-                   sign_distance=param(params, "sign_distance", 3.0, float),
-                   track_scale=param(params, "track_scale", 1.0, float),
-                   n_positions=param(params, "n_positions", 20, int), n_eval=param(params, "n_eval", 100, int),
-                   fovea=param(params, "fovea", 16, int), max_car_steps=param(params, "max_car_steps", 1000, int),
-                   render_grid=param(params, "render_grid", 0.005, float))
 
     # geometry ----------------------------------------------------------------------------------
     def z_of(self, x: float | np.ndarray) -> np.ndarray:

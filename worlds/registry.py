@@ -1,67 +1,69 @@
-"""World kinds by name, so that `sme world NAME` and the demo can build them."""
+"""World kinds by name, so that `sme world NAME` and the demo can build them, and `--list-params`
+and the README can show each kind's declared parameters.
+
+World modules are imported lazily (PyBullet loads only for the worlds that need it)."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping
+import importlib
+from dataclasses import dataclass
+from typing import Any, Mapping
 
+from sensorimotor.protocol.params import ParamError, unknown_name, parse
 from sensorimotor.worlds.base import World
 
 
-def _gridworld(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from sensorimotor.worlds.gridworld import GridWorld
+@dataclass(frozen=True)
+class WorldKind:
+    """Where a world kind lives: module, World class and its parameter dataclass (by name)."""
 
-    return GridWorld.from_params(world_id, seed, params)
+    module: str
+    cls: str
+    params: str
+    summary: str
 
+    def world_class(self) -> type[World]:
+        return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.cls)
 
-def _gridworld_barrier(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    return _gridworld(world_id, seed, {**params, "barrier": "true"})
-
-
-def _retina(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from sensorimotor.worlds.retina import RetinaWorld
-
-    return RetinaWorld.from_params(world_id, seed, params)
-
-
-def _vergence(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from sensorimotor.worlds.vergence import VergenceWorld
-
-    return VergenceWorld.from_params(world_id, seed, params)
+    def params_type(self) -> type:
+        return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.params)
 
 
-def _mountaincar(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from sensorimotor.worlds.mountaincar import MountainCarWorld
-
-    return MountainCarWorld.from_params(world_id, seed, params)
-
-
-def _stereo(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from sensorimotor.worlds.stereo_pair import StereoPairWorld
-
-    return StereoPairWorld.from_params(world_id, seed, params)
-
-
-def _bench(world_id: str, seed: int, params: Mapping[str, Any]) -> World:
-    from sensorimotor.worlds.bench import BenchWorld
-
-    return BenchWorld.from_params(world_id, seed, params)
-
-
-WORLDS: dict[str, Callable[[str, int, Mapping[str, Any]], World]] = {
-    "gridworld": _gridworld,
-    "gridworld-barrier": _gridworld_barrier,
-    "retina": _retina,
-    "vergence": _vergence,
-    "stereo": _stereo,
-    "mountaincar": _mountaincar,
-    "bench": _bench,
+WORLDS: dict[str, WorldKind] = {
+    "gridworld": WorldKind("gridworld", "GridWorld", "GridWorldParams", "gridworld of Fig 5.1 (ch. 5)"),
+    "gridworld-barrier": WorldKind("gridworld", "GridWorld", "BarrierGridWorldParams",
+                                   "the gridworld with the S-shaped barrier of Fig 5.1b"),
+    "retina": WorldKind("retina", "RetinaWorld", "RetinaWorldParams", "foveated retina on a pan/tilt camera (ch. 4)"),
+    "vergence": WorldKind("vergence", "VergenceWorld", "VergenceWorldParams", "depth from vergence (ch. 7)"),
+    "stereo": WorldKind("stereo_pair", "StereoPairWorld", "StereoPairParams",
+                        "vergence on the Middlebury motorcycle pair (ch. 7.2.2)"),
+    "mountaincar": WorldKind("mountaincar", "MountainCarWorld", "MountainCarWorldParams",
+                             "the visual mountain car (ch. 8)"),
+    "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }
+
+
+def world_kind(name: str) -> WorldKind:
+    """The registry entry of world kind `name`; a ParamError naming the known kinds otherwise."""
+    try:
+        return WORLDS[name]
+    except KeyError:
+        raise ParamError(unknown_name("world", name, sorted(WORLDS))) from None
+
+
+def world_params(name: str) -> type:
+    """The parameter dataclass of world kind `name`."""
+    return world_kind(name).params_type()
+
+
+def parse_world_params(name: str, params: Mapping[str, Any] | None = None) -> Any:
+    """World kind `name`'s parameters from `k=v` strings or typed values (ParamError if invalid)."""
+    return parse(world_params(name), params or {}, name=name)
 
 
 def make_world(name: str, world_id: str | None = None, seed: int = 0,
                params: Mapping[str, Any] | None = None) -> World:
-    try:
-        factory = WORLDS[name]
-    except KeyError:
-        raise ValueError(f"unknown world {name!r}; known: {', '.join(sorted(WORLDS))}") from None
-    return factory(world_id or name, seed, dict(params or {}))
+    """Build world kind `name`; `params` are validated against its declaration first."""
+    kind = world_kind(name)
+    prm = parse(kind.params_type(), params or {}, name=name)
+    return kind.world_class()(world_id or name, seed, prm)

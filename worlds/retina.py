@@ -19,13 +19,15 @@ Perturbations: lesion (fields in a disc read 0), reverse (up/down motor commands
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
+from sensorimotor.protocol.params import option, parse
 from sensorimotor.worlds.base import PerturbationError, StepResult, World, param
 from sensorimotor.worlds.bullet import disconnect
 
@@ -44,21 +46,39 @@ def field_layout(layers: int, fields: int, field_px: float) -> np.ndarray:
     return np.concatenate(out)
 
 
+@dataclass(frozen=True)
+class RetinaWorldParams:
+    """Parameters of the foveated retina on a pan/tilt camera (Fig 4.1)."""
+
+    layers: int = option(4, "retina layers; field size halves per layer", min=1)
+    fields: int = option(32, "receptive fields per layer side", min=2)
+    field_px: float = option(4.0, "width of a field in the largest layer, retina px (> 0)")
+    fov_deg: float = option(30.0, "field of view of the largest layer, degrees, in (0, 120)")
+    scene: str = option("spot", "what the wall shows", choices=SCENES)
+    spot_px: float = option(6.0, "spot diameter seen straight on, retina px", min=0.0)
+    n_spots: int = option(3, "number of spots for scene=spots", min=1)
+    reposition_px: float = option(48.0, "random reposition before each saccade, up to this many px", min=0.0)
+    max_saccade_deg: float = option(16.0, "largest saccade per axis, degrees", min=0.0)
+    supersample: int = option(2, "render samples per field side (1 is ~3x faster)", min=1)
+    wall_distance: float = option(5.0, "distance from the camera to the wall, m")
+
+
 class RetinaWorld(World):
     kind = "retina"
     max_episode_steps = 1
+    Params = RetinaWorldParams
 
-    def __init__(self, world_id: str = "retina", seed: int = 0, layers: int = 4, fields: int = 32,
-                 field_px: float = 4.0, fov_deg: float = 30.0, scene: str = "spot", spot_px: float = 6.0,
-                 n_spots: int = 3, reposition_px: float = 48.0, max_saccade_deg: float = 16.0,
-                 supersample: int = 2, wall_distance: float = 5.0) -> None:
+    def __init__(self, world_id: str = "retina", seed: int = 0, params: RetinaWorldParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(world_id, seed)
-        if scene not in SCENES:
-            raise ValueError(f"scene must be one of {SCENES}, not {scene!r}")
-        if layers < 1 or fields < 2 or field_px <= 0 or supersample < 1:
-            raise ValueError("layers >= 1, fields >= 2, field_px > 0 and supersample >= 1 are required")
+        self.params = prm = parse(RetinaWorldParams, overrides, name=self.kind, base=params)
+        layers, fields, field_px, fov_deg = prm.layers, prm.fields, prm.field_px, prm.fov_deg
+        scene, spot_px, n_spots, reposition_px = prm.scene, prm.spot_px, prm.n_spots, prm.reposition_px
+        max_saccade_deg, supersample, wall_distance = prm.max_saccade_deg, prm.supersample, prm.wall_distance
+        if field_px <= 0:
+            raise ValueError(f"retina: field_px={field_px} must be > 0")
         if not 0 < fov_deg < 120:
-            raise ValueError("fov_deg must be in (0, 120)")
+            raise ValueError(f"retina: fov_deg={fov_deg} must be in (0, 120)")
         self.layers, self.fields, self.field_px = layers, fields, field_px
         self.supersample = supersample
         self.retina_px = fields * field_px
@@ -86,16 +106,6 @@ class RetinaWorld(World):
             for L in range(layers)]
         self._res = res
         self._frame: np.ndarray | None = None
-
-    @classmethod
-    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "RetinaWorld":
-        return cls(world_id, seed, layers=param(params, "layers", 4, int), fields=param(params, "fields", 32, int),
-                   field_px=param(params, "field_px", 4.0, float), fov_deg=param(params, "fov_deg", 30.0, float),
-                   scene=param(params, "scene", "spot"), spot_px=param(params, "spot_px", 6.0, float),
-                   n_spots=param(params, "n_spots", 3, int),
-                   reposition_px=param(params, "reposition_px", 48.0, float),
-                   max_saccade_deg=param(params, "max_saccade_deg", 16.0, float),
-                   supersample=param(params, "supersample", 2, int))
 
     # scene -------------------------------------------------------------------------------------
     def _build_scene(self, spot_px: float, n_spots: int) -> None:

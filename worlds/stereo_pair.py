@@ -13,13 +13,15 @@ confidence that repeated texture and occlusions fail). Truth: the dataset's disp
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
 
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
-from sensorimotor.worlds.base import StepResult, World, param
+from sensorimotor.protocol.params import option, parse
+from sensorimotor.worlds.base import StepResult, World
 from sensorimotor.worlds.vergence import foveal_difference, verge
 
 
@@ -38,12 +40,25 @@ def salient_points(img: np.ndarray, disp: np.ndarray, n: int, radius: int, max_s
     return np.stack([rows[order], cols[order]], axis=1)
 
 
+@dataclass(frozen=True)
+class StereoPairParams:
+    """Parameters of the stereo-pair vergence world (ch. 7.2.2)."""
+
+    n_starts: int = option(30, "start states: salient points kept", min=2)
+    radius: int = option(10, "fovea half-width, px (the fovea is 2 radius + 1 px wide)", min=1)
+    max_shift: int = option(80, "largest right-fovea shift (disparity) scanned, px", min=1)
+    uniqueness: float = option(0.7, "keep a point if its best match beats every other by this factor", min=0.0, max=1.0)
+
+
 class StereoPairWorld(World):
     kind = "stereo"
+    Params = StereoPairParams
 
-    def __init__(self, world_id: str = "stereo", seed: int = 0, n_starts: int = 30, radius: int = 10,
-                 max_shift: int = 80, uniqueness: float = 0.7) -> None:
+    def __init__(self, world_id: str = "stereo", seed: int = 0, params: StereoPairParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(world_id, seed)
+        self.params = prm = parse(StereoPairParams, overrides, name=self.kind, base=params)
+        n_starts, radius, max_shift, uniqueness = prm.n_starts, prm.radius, prm.max_shift, prm.uniqueness
         from skimage import data
 
         left, right, disp = data.stereo_motorcycle()
@@ -60,11 +75,6 @@ class StereoPairWorld(World):
         if len(self.points) < 2:
             raise ValueError("too few salient points with ground truth")
         self._goals: dict[int, int] = {}
-
-    @classmethod
-    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "StereoPairWorld":
-        return cls(world_id, seed, n_starts=param(params, "n_starts", 30, int), radius=param(params, "radius", 10, int),
-                   max_shift=param(params, "max_shift", 80, int), uniqueness=param(params, "uniqueness", 0.7, float))
 
     def _differences(self) -> np.ndarray:
         return np.array([foveal_difference(*self._patches(k)) for k in range(self.max_shift + 1)])

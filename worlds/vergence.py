@@ -15,7 +15,8 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pybullet as p
@@ -23,6 +24,7 @@ import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
+from sensorimotor.protocol.params import option, parse
 from sensorimotor.worlds.base import PerturbationError, StepResult, World, param
 from sensorimotor.worlds.bullet import disconnect
 
@@ -56,14 +58,34 @@ def foveal_difference(left: np.ndarray, right: np.ndarray) -> float:
     return float(np.abs(np.asarray(left, np.float64) - np.asarray(right, np.float64)).mean())
 
 
+@dataclass(frozen=True)
+class VergenceWorldParams:
+    """Parameters of the vergence robot (ch. 7)."""
+
+    baseline: float = option(0.5, "distance between the cameras, m (> 0)")
+    sign_distance: float = option(3.0, "distance from the track origin to the stop sign, m")
+    n_starts: int = option(20, "start states: track positions from `nearest` to the sign", min=2)
+    nearest: float = option(0.8, "nearest start position's distance to the sign, m (0 < nearest < sign_distance)")
+    step_rad: float = option(0.01, "eye turn per converge/diverge action, rad")
+    fovea: int = option(16, "fovea side, px", min=1)
+    fovea_deg: float = option(12.0, "fovea field of view, degrees")
+    max_steps: int = option(40, "vergence steps per episode (the eyes' range)", min=1)
+    vertical: bool = option(False, "cameras one above the other instead of side by side")
+    sign_radius: float = option(0.375, "radius of the octagonal sign, m")
+    room: bool = option(False, "a closed room with smooth-noise textures instead of a backdrop")
+
+
 class VergenceWorld(World):
     kind = "vergence"
+    Params = VergenceWorldParams
 
-    def __init__(self, world_id: str = "vergence", seed: int = 0, baseline: float = 0.5, sign_distance: float = 3.0,
-                 n_starts: int = 20, nearest: float = 0.8, step_rad: float = 0.01, fovea: int = 16,
-                 fovea_deg: float = 12.0, max_steps: int = 40, vertical: bool = False, sign_radius: float = 0.375,
-                 room: bool = False) -> None:
+    def __init__(self, world_id: str = "vergence", seed: int = 0, params: VergenceWorldParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(world_id, seed)
+        self.params = prm = parse(VergenceWorldParams, overrides, name=self.kind, base=params)
+        baseline, sign_distance, n_starts, nearest = prm.baseline, prm.sign_distance, prm.n_starts, prm.nearest
+        step_rad, fovea, fovea_deg, max_steps = prm.step_rad, prm.fovea, prm.fovea_deg, prm.max_steps
+        vertical, sign_radius, room = prm.vertical, prm.sign_radius, prm.room
         self.sign_radius, self.room = sign_radius, room
         self._body0 = (baseline, vertical)
         if baseline <= 0 or not 0 < nearest < sign_distance or n_starts < 2:
@@ -82,13 +104,6 @@ class VergenceWorld(World):
         self._build()
         self._proj = self._c.computeProjectionMatrixFOV(fovea_deg, 1.0, 0.05, 20.0)
         self._goal_cache: dict[int, int] = {}
-
-    @classmethod
-    def from_params(cls, world_id: str, seed: int, params: Mapping[str, Any]) -> "VergenceWorld":
-        return cls(world_id, seed, baseline=param(params, "baseline", 0.5, float),
-                   sign_distance=param(params, "sign_distance", 3.0, float), n_starts=param(params, "n_starts", 20, int),
-                   nearest=param(params, "nearest", 0.8, float), fovea=param(params, "fovea", 16, int),
-                   fovea_deg=param(params, "fovea_deg", 12.0, float), vertical=param(params, "vertical", False, bool))
 
     def _build(self) -> None:
         c = self._c

@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from sensorimotor.agent.snapshot import rng_state, set_rng_state
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
+from sensorimotor.protocol.params import parse
 
 
 @dataclass(frozen=True)
@@ -76,8 +77,18 @@ class EventOutput:
     reason: str = ""
 
 
+@dataclass(frozen=True)
+class EchoParams:
+    """The echo program has no parameters."""
+
+
 class Program(abc.ABC):
+    """A developmental program. It declares its hyperparameters once, as a frozen dataclass (see
+    `protocol.params`) named by the class attribute `Params`; its constructor takes
+    `(spec, seed, params=None, **overrides)` and keeps the parsed instance as `self.params`."""
+
     name = "program"
+    Params: ClassVar[type] = EchoParams
     # settings for the daemon's drop detector that suit this program's `performance` stream, e.g. a
     # shorter warm-up for one value per episode than for one per step
     detector_params: dict[str, Any] = {}
@@ -86,9 +97,6 @@ class Program(abc.ABC):
         self.spec = spec
         self.seed = seed
         self.rng = np.random.default_rng(seed)
-        # the keyword parameters it was made with (make_program records them): a checkpoint
-        # rebuilds the program from them before restoring its state
-        self.params: dict[str, Any] = {}
         self._outbox: list[Any] = []
 
     @abc.abstractmethod
@@ -130,6 +138,11 @@ class EchoProgram(Program):
     """Answers every observation with action 0: the baseline for the loop benchmark."""
 
     name = "echo"
+    Params = EchoParams
+
+    def __init__(self, spec: WorldSpec, seed: int = 0, params: EchoParams | None = None, **overrides: Any) -> None:
+        super().__init__(spec, seed)
+        self.params = parse(EchoParams, overrides, name=self.name, base=params)
 
     def act(self, obs: Observation) -> Decision:
         return Decision((0.0,))

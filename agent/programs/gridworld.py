@@ -9,6 +9,7 @@ distances, classical MDS to 2-D, emit Embedding vN. Error falls as LSPI iterates
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,15 +21,32 @@ from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.agent.snapshot import array_or_none, tuple_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
+from sensorimotor.protocol.params import option, parse
+
+
+@dataclass(frozen=True)
+class GridworldProgramParams:
+    """Hyperparameters of the gridworld program (ch. 5)."""
+
+    samples_per_iteration: int = option(400, "new random-walk samples between LSPI iterations", min=1)
+    max_trace: int = option(60, "longest greedy trace recorded from a start state", min=1)
+    gamma: float = option(0.9, "LSPI discount", min=0.0, max=1.0)
+    ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
+    dims: int = option(2, "embedding dimensions (classical MDS)", min=1)
+    policy: str = option("lspi", "policy whose traces are embedded", choices=("lspi", "random"))
+    substitution_cost: int = option(2, "edit-distance cost of a substitution (2: indel distance)", min=1)
 
 
 class GridworldProgram(Program):
     name = "gridworld"
+    Params = GridworldProgramParams
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 400,
-                 max_trace: int = 60, gamma: float = 0.9, ridge: float = 1e-3, dims: int = 2,
-                 policy: str = "lspi", substitution_cost: int = 2) -> None:
+    def __init__(self, spec: WorldSpec, seed: int = 0, params: GridworldProgramParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(spec, seed)
+        self.params = prm = parse(GridworldProgramParams, overrides, name=self.name, base=params)
+        samples_per_iteration, max_trace, gamma, ridge = prm.samples_per_iteration, prm.max_trace, prm.gamma, prm.ridge
+        dims, policy, substitution_cost = prm.dims, prm.policy, prm.substitution_cost
         if not spec.action_space.discrete:
             raise SpecMismatch(f"gridworld program needs discrete actions; world {spec.world_id} has a box")
         if spec.n_starts < 3:

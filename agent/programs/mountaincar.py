@@ -28,6 +28,7 @@ embedding is put in the old one's coordinates by a similarity fit over the same 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,8 +45,31 @@ from sensorimotor.agent.programs.vergence import VergencePractice, foveal_differ
 from sensorimotor.agent.snapshot import array_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
+from sensorimotor.protocol.params import option, parse
 
 CONVERGE, DIVERGE, REVERSE = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class MountainCarProgramParams:
+    """Hyperparameters of the mountain-car program (ch. 8)."""
+
+    samples_per_iteration: int = option(400, "vergence samples between LSPI iterations", min=1)
+    epsilon: float = option(0.2, "vergence exploration: probability of a random action", min=0.0, max=1.0)
+    vergence_gamma: float = option(0.95, "LSPI discount of the vergence stage", min=0.0, max=1.0)
+    ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
+    max_trace: int = option(80, "longest vergence trace", min=2)
+    alpha: float = option(0.3, "Sarsa(lambda) step size", min=0.0)
+    gamma: float = option(0.99, "Sarsa(lambda) discount", min=0.0, max=1.0)
+    lam: float = option(0.9, "Sarsa(lambda) trace decay", min=0.0, max=1.0)
+    tiles: int = option(10, "tiles per dimension and tiling", min=1)
+    n_tilings: int = option(8, "tilings", min=1)
+    drive_epsilon: float = option(0.0, "driving exploration: probability of a random action", min=0.0, max=1.0)
+    eval_every: int = option(10_000, "training car steps between evaluations", min=1)
+    n_eval: int | None = option(None, "evaluation states used (none: all the world offers)", min=0)
+    watch_after: int = option(50_000, "training car steps before episodes report performance", min=0)
+    report_after: int = option(400, "car steps after which a trained driver gives up an episode", min=1)
+    process_var: float = option(1e-5, "process variance of the velocity Kalman filter", min=0.0)
 
 
 class MountainCarProgram(Program):
@@ -54,12 +78,16 @@ class MountainCarProgram(Program):
     # driver within some 20 episodes
     detector_params = {"warmup": 20, "rate": 0.05}
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 400, epsilon: float = 0.2,
-                 vergence_gamma: float = 0.95, ridge: float = 1e-3, max_trace: int = 80,
-                 alpha: float = 0.3, gamma: float = 0.99, lam: float = 0.9, tiles: int = 10, n_tilings: int = 8,
-                 drive_epsilon: float = 0.0, eval_every: int = 10_000, n_eval: int | None = None,
-                 watch_after: int = 50_000, report_after: int = 400, process_var: float = 1e-5) -> None:
+    Params = MountainCarProgramParams
+
+    def __init__(self, spec: WorldSpec, seed: int = 0, params: MountainCarProgramParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(spec, seed)
+        self.params = prm = parse(MountainCarProgramParams, overrides, name=self.name, base=params)
+        samples_per_iteration, epsilon, vergence_gamma, ridge = prm.samples_per_iteration, prm.epsilon, prm.vergence_gamma, prm.ridge
+        max_trace, alpha, gamma, lam, tiles, n_tilings = prm.max_trace, prm.alpha, prm.gamma, prm.lam, prm.tiles, prm.n_tilings
+        drive_epsilon, eval_every, n_eval, watch_after = prm.drive_epsilon, prm.eval_every, prm.n_eval, prm.watch_after
+        report_after, process_var = prm.report_after, prm.process_var
         if not spec.action_space.discrete or spec.action_space.n != 5:
             raise SpecMismatch("mountaincar program needs 5 discrete actions (converge, diverge, reverse, coast, forward)")
         spec.sensor("left"), spec.sensor("right")

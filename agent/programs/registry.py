@@ -1,53 +1,84 @@
-"""Programs by name (the world's `program` hint picks one)."""
+"""Programs by name (the world's `program` hint picks one), each with its declared parameters.
+
+Program modules are imported lazily; `check_program_params` validates `PROGRAM.KEY=V` settings
+before anything runs, so a daemon never meets an unknown key when a world attaches."""
 
 from __future__ import annotations
 
-from typing import Any, Callable
+import importlib
+from dataclasses import dataclass
+from typing import Any, Mapping
 
-from sensorimotor.agent.programs.base import EchoProgram, Program
+from sensorimotor.agent.programs.base import Program
+from sensorimotor.protocol.params import ParamError, unknown_name, cast_values
 from sensorimotor.protocol.messages import WorldSpec
 
 
-def _gridworld(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from sensorimotor.agent.programs.gridworld import GridworldProgram
+@dataclass(frozen=True)
+class ProgramKind:
+    """Where a program lives: module, Program class and its parameter dataclass (by name)."""
 
-    return GridworldProgram(spec, seed, **kw)
+    module: str
+    cls: str
+    params: str
+    summary: str
 
+    def program_class(self) -> type[Program]:
+        return getattr(importlib.import_module(f"sensorimotor.agent.programs.{self.module}"), self.cls)
 
-def _retina(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from sensorimotor.agent.programs.retina import RetinaProgram
-
-    return RetinaProgram(spec, seed, **kw)
-
-
-def _vergence(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from sensorimotor.agent.programs.vergence import VergenceProgram
-
-    return VergenceProgram(spec, seed, **kw)
+    def params_type(self) -> type:
+        return getattr(importlib.import_module(f"sensorimotor.agent.programs.{self.module}"), self.params)
 
 
-def _mountaincar(spec: WorldSpec, seed: int, **kw: Any) -> Program:
-    from sensorimotor.agent.programs.mountaincar import MountainCarProgram
-
-    return MountainCarProgram(spec, seed, **kw)
-
-
-PROGRAMS: dict[str, Callable[..., Program]] = {
-    "vergence": _vergence,
-    "gridworld": _gridworld,
-    "retina": _retina,
-    "mountaincar": _mountaincar,
-    "echo": lambda spec, seed, **kw: EchoProgram(spec, seed),
+PROGRAMS: dict[str, ProgramKind] = {
+    "vergence": ProgramKind("vergence", "VergenceProgram", "VergenceProgramParams",
+                            "LSPI vergence, trace lengths embedded as depth (ch. 7)"),
+    "gridworld": ProgramKind("gridworld", "GridworldProgram", "GridworldProgramParams",
+                             "LSPI toward the goal, edit-distance embedding of greedy traces (ch. 5)"),
+    "retina": ProgramKind("retina", "RetinaProgram", "RetinaProgramParams",
+                          "saccade learning, ballistic embedding of field positions (ch. 4)"),
+    "mountaincar": ProgramKind("mountaincar", "MountainCarProgram", "MountainCarProgramParams",
+                               "vergence geometry, then Sarsa(lambda) driving on top of it (ch. 8)"),
+    "echo": ProgramKind("base", "EchoProgram", "EchoParams", "answers every observation with action 0 (benchmarks)"),
 }
 
 
-def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
-    name = spec.program or spec.kind
+def program_kind(name: str) -> ProgramKind:
+    """The registry entry of program `name`; a ParamError naming the known programs otherwise."""
     try:
-        factory = PROGRAMS[name]
+        return PROGRAMS[name]
     except KeyError:
+        raise ParamError(unknown_name("program", name, sorted(PROGRAMS))) from None
+
+
+def program_params(name: str) -> type:
+    """The parameter dataclass of program `name`."""
+    return program_kind(name).params_type()
+
+
+def check_program_params(params: Mapping[str, Mapping[str, Any]] | None) -> dict[str, dict[str, Any]]:
+    """Validate `{program: {key: value}}` (strings or typed values) and return the typed overrides.
+
+    Only the given keys are kept (JSON-friendly, so a daemon can record them in its config); every
+    problem across all programs is reported in one ParamError.
+    """
+    out: dict[str, dict[str, Any]] = {}
+    problems: list[str] = []
+    for name, values in (params or {}).items():
+        try:
+            out[name] = cast_values(program_params(name), values, name)
+        except ParamError as e:
+            problems.append(str(e))
+    if problems:
+        raise ParamError("; ".join(problems))
+    return out
+
+
+def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
+    """The program for `spec` (its `program` hint, else its kind), with hyperparameters `kw`
+    (strings or typed values, validated against the program's declaration)."""
+    name = spec.program or spec.kind
+    if name not in PROGRAMS:
         raise ValueError(f"no developmental program {name!r} for world {spec.world_id!r}; "
-                         f"known: {', '.join(sorted(PROGRAMS))}") from None
-    program = factory(spec, seed, **kw)
-    program.params = dict(kw)  # what a checkpoint rebuilds it from
-    return program
+                         f"known: {', '.join(sorted(PROGRAMS))}")
+    return PROGRAMS[name].program_class()(spec, seed, **kw)

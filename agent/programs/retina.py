@@ -13,25 +13,45 @@ settled publishes an embedding whose trigger names the drop.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from sensorimotor.agent.learners.saccade import SaccadeLearner
+from sensorimotor.agent.learners.saccade import EXPLORATION, RULES, SaccadeLearner
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.snapshot import array_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
+from sensorimotor.protocol.params import option, parse
+
+
+@dataclass(frozen=True)
+class RetinaProgramParams:
+    """Hyperparameters of the retina program (ch. 4)."""
+
+    rule: str = option("robust", "saccade learning rule (Eq 4.4-4.5 basic, Eq 4.7 robust)", choices=RULES)
+    exploration: str = option("relearn", "exploration of the saccade learner", choices=EXPLORATION)
+    alpha: float = option(0.5, "learning rate of the field positions", min=0.0)
+    noise_sd: float | None = option(None, "exploration noise sd, action units (none: 0.075 x the action range)", min=0.0)
+    embed_every: int = option(1000, "saccades between periodic embeddings", min=1)
+    settle_min: int = option(1000, "saccades after a drop before the reward may count as settled", min=0)
+    settle_window: int = option(300, "saccades in the settled-reward window", min=1)
+    settle_gain: float = option(0.03, "relative reward change below which it counts as settled", min=0.0)
+    min_experience: float = option(1.0, "summed activation before a field is embedded", min=0.0)
 
 
 class RetinaProgram(Program):
     name = "retina"
+    Params = RetinaProgramParams
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, rule: str = "robust", exploration: str = "relearn",
-                 alpha: float = 0.5, noise_sd: float | None = None, embed_every: int = 1000,
-                 settle_min: int = 1000, settle_window: int = 300, settle_gain: float = 0.03,
-                 min_experience: float = 1.0) -> None:
+    def __init__(self, spec: WorldSpec, seed: int = 0, params: RetinaProgramParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(spec, seed)
+        self.params = prm = parse(RetinaProgramParams, overrides, name=self.name, base=params)
+        rule, exploration, alpha, noise_sd = prm.rule, prm.exploration, prm.alpha, prm.noise_sd
+        embed_every, settle_min, settle_window = prm.embed_every, prm.settle_min, prm.settle_window
+        settle_gain, min_experience = prm.settle_gain, prm.min_experience
         a = spec.action_space
         if a.discrete or a.dims != 2:
             raise SpecMismatch(f"retina program needs a 2-D box action space, world {spec.world_id} has {a}")

@@ -11,6 +11,7 @@ lengths, Eq 7.3), classical MDS to 1-D.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -21,6 +22,7 @@ from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOut
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
+from sensorimotor.protocol.params import option, parse
 
 
 def foveal_difference(obs: Observation) -> float:
@@ -76,13 +78,30 @@ class VergencePractice:
         return a
 
 
+@dataclass(frozen=True)
+class VergenceProgramParams:
+    """Hyperparameters of the vergence program (ch. 7)."""
+
+    samples_per_iteration: int = option(300, "new samples between LSPI iterations", min=1)
+    epsilon: float = option(0.2, "exploration: probability of a random vergence action", min=0.0, max=1.0)
+    gamma: float = option(0.95, "LSPI discount", min=0.0, max=1.0)
+    ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
+    max_trace: int = option(100, "longest greedy trace recorded from a start state", min=1)
+    centres: tuple[float, ...] = option(tuple(float(c) for c in np.linspace(0.0, 0.2, 11)),
+                                        "RBF centres over the foveal difference d")
+    width: float = option(0.02, "RBF width")
+
+
 class VergenceProgram(Program):
     name = "vergence"
+    Params = VergenceProgramParams
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, samples_per_iteration: int = 300, epsilon: float = 0.2,
-                 gamma: float = 0.95, ridge: float = 1e-3, max_trace: int = 100,
-                 centres: tuple[float, ...] = tuple(np.linspace(0.0, 0.2, 11)), width: float = 0.02) -> None:
+    def __init__(self, spec: WorldSpec, seed: int = 0, params: VergenceProgramParams | None = None,
+                 **overrides: Any) -> None:
         super().__init__(spec, seed)
+        self.params = prm = parse(VergenceProgramParams, overrides, name=self.name, base=params)
+        samples_per_iteration, epsilon, gamma, ridge = prm.samples_per_iteration, prm.epsilon, prm.gamma, prm.ridge
+        max_trace, centres, width = prm.max_trace, prm.centres, prm.width
         if not spec.action_space.discrete or spec.action_space.n != 2 or spec.n_starts < 2:
             raise SpecMismatch("vergence program needs 2 discrete actions (converge, diverge) and >= 2 start states")
         spec.sensor("left"), spec.sensor("right")
