@@ -13,7 +13,6 @@ from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from sensorimotor.tools.common import add_verbosity, setup_logging, verbosity
 
 log = logging.getLogger("sme.agent")
 
@@ -37,7 +36,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "gridworld.samples_per_iteration=200")
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)")
     add_bus_arguments(p, "agent")
-    add_verbosity(p)
     p.set_defaults(func=main_args)
 
 
@@ -88,5 +86,4 @@ def run_agent(args: argparse.Namespace) -> int:
 
 
 def main_args(args: argparse.Namespace) -> int:
-    setup_logging(verbosity(args))
     return run_agent(args)

@@ -7,7 +7,7 @@ import json
 import logging
 
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from sensorimotor.tools.common import add_verbosity, parse_params, setup_logging, verbosity
+from sensorimotor.tools.common import parse_params
 from sensorimotor.worlds.node import WorldNode
 from sensorimotor.worlds.registry import WORLDS, make_world
 
@@ -33,12 +33,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="write loop statistics (steps, steps/s, round-trip p50/p99) as JSON when done")
     p.add_argument("--warmup", type=int, default=200, help="steps excluded from latency statistics")
     add_bus_arguments(p, "world")
-    add_verbosity(p)
     p.set_defaults(func=main_args)
 
 
 def main_args(args: argparse.Namespace) -> int:
-    setup_logging(verbosity(args))
     try:
         world = make_world(args.name, args.id, args.seed, parse_params(args.param))
     except ValueError as e:
