@@ -54,7 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     for child in _subparsers(p):
         add_verbosity(child)
         epilog = EXIT_CODES_EPILOG
-        if issubclass(child.formatter_class, argparse.RawDescriptionHelpFormatter):
+        formatter = child.formatter_class
+        if isinstance(formatter, type) and issubclass(formatter, argparse.RawDescriptionHelpFormatter):
             epilog = textwrap.fill(epilog, 100)  # raw formatters print it as given
         child.epilog = f"{child.epilog}\n\n{epilog}" if child.epilog else epilog
     return p

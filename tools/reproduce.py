@@ -321,6 +321,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main_args(args: argparse.Namespace) -> int:
+    if args.runs < 1 or args.workers < 1:
+        print("sme reproduce: --runs and --workers must be >= 1", file=sys.stderr)
+        return 2
     require("matplotlib")  # the plots need it: say so now, not after the runs
     out = os.path.join(args.out, args.chapter)
     os.makedirs(out, exist_ok=True)
