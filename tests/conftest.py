@@ -6,8 +6,10 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+from typing import IO, Any
 
 import pytest
 
@@ -67,3 +69,43 @@ def wait_for(pred, timeout: float = 20.0, every: float = 0.1):
             return v
         time.sleep(every)
     return pred()
+
+
+class Lines:
+    """The lines of a process's text stream, read on a background thread as they come, so that a
+    test can wait for one (a readiness line) instead of sleeping. Do not read the stream elsewhere."""
+
+    def __init__(self, stream: IO[str]) -> None:
+        self.lines: list[str] = []
+        threading.Thread(target=self._read, args=(stream,), daemon=True).start()
+
+    def _read(self, stream: IO[str]) -> None:
+        try:
+            for line in stream:
+                self.lines.append(line)
+        except (ValueError, OSError):  # closed at teardown
+            pass
+
+    def has(self, text: str) -> bool:
+        return any(text in line for line in list(self.lines))
+
+
+def agent_status(ep: str, agent: str = "a0") -> Any:
+    """The daemon's AgentStatus, or None while no agent answers on `ep`."""
+    from sensorimotor.protocol import codec, keys
+    from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+    from sensorimotor.protocol.messages import AgentStatus
+
+    try:
+        with Bus(BusConfig.for_role("tool", ep)) as bus:
+            r = bus.get(keys.agent_status(agent), timeout=2.0)
+            return codec.decode(AgentStatus, r[0].payload) if r else None
+    except BusError:
+        return None  # the agent is not up (yet)
+
+
+def world_link(st: Any, wid: str) -> Any:
+    """The status of world `wid`'s link in an AgentStatus (None if absent)."""
+    if st is None:
+        return None
+    return next((ln for ln in st.links if ln.world_id == wid), None)

@@ -103,3 +103,134 @@ def test_agent_lists_program_params():
 def test_demo_refuses_an_unknown_param(endpoint):
     out = _sme("demo", "--world", "gridworld", "--param", "sise=5", "--listen", endpoint, "--steps", "10")
     assert out.returncode == 2 and "did you mean 'size'?" in out.stderr, out.stderr
+
+
+# --- the same behaviour in every command --------------------------------------------------------
+
+# the least each command needs to parse (its positional arguments)
+MINIMAL_ARGS = {"world": ["gridworld"], "perturb": ["heal", "--world", "g1"], "record": ["x.mcap"], "replay": ["x.mcap"],
+                "recover": ["a.mcap", "b.mcap"], "reproduce": ["gridworld"]}
+
+
+def all_commands() -> list[list[str]]:
+    """Every subcommand path of `sme` (e.g. ["bench", "loop"]), found by walking the parser."""
+    import argparse
+
+    from sensorimotor.tools.cli import build_parser
+
+    def walk(p: argparse.ArgumentParser, path: list[str]):
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for name, child in a.choices.items():
+                    yield path + [name], child
+                    yield from walk(child, path + [name])
+
+    return [path for path, _ in walk(build_parser(), [])]
+
+
+def subparser(path: list[str]):
+    import argparse
+
+    from sensorimotor.tools.cli import build_parser
+
+    p = build_parser()
+    for name in path:
+        p = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction)).choices[name]
+    return p
+
+
+def test_the_walk_finds_every_command():
+    names = {" ".join(c) for c in all_commands()}
+    assert {"agent", "world", "perturb", "watch", "status", "record", "replay", "recover", "view", "demo", "reproduce",
+            "bench", "bench loop", "bench detectors"} <= names
+
+
+@pytest.mark.parametrize("path", all_commands(), ids=lambda c: " ".join(c))
+def test_every_command_documents_exit_codes_and_takes_q_and_v(path):
+    from sensorimotor.tools.cli import build_parser
+    from sensorimotor.tools.common import verbosity
+
+    text = " ".join(subparser(path).format_help().split())
+    for code in ("0 ok", "1 runtime failure", "2 usage error", "130 interrupted"):
+        assert code in text, (path, code)
+    argv = path + MINIMAL_ARGS.get(" ".join(path), [])
+    assert verbosity(build_parser().parse_args(argv + ["-q"])) == -1
+    assert verbosity(build_parser().parse_args(argv + ["-v"])) == 1
+    assert verbosity(build_parser().parse_args(argv + ["-vv"])) == 2
+    assert verbosity(build_parser().parse_args(argv + ["--quiet"])) == -1
+
+
+def test_a_flag_given_to_a_parent_command_survives_its_subcommand():
+    from sensorimotor.tools.cli import build_parser
+    from sensorimotor.tools.common import verbosity
+
+    assert verbosity(build_parser().parse_args(["bench", "-q", "loop"])) == -1
+    assert verbosity(build_parser().parse_args(["-v", "status"])) == 1
+    assert verbosity(build_parser().parse_args(["demo"])) == -1  # the demo prints its own progress
+    assert verbosity(build_parser().parse_args(["agent"])) == 0
+
+
+def test_record_accepts_q_on_the_real_command_line():
+    out = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "record", "--help", "-q"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "130 interrupted" in " ".join(out.stdout.split()), out.stderr
+
+
+def test_usage_errors_exit_2_with_a_message(capsys):
+    from sensorimotor.tools.cli import main
+
+    assert main(["perturb", "heal", "--world", "g1", "--param", "novalue"]) == 2
+    assert "sme perturb: --param expects key=value" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:  # argparse's own errors
+        main(["world"])
+    assert e.value.code == 2
+
+
+def test_require_names_the_extra_to_install(monkeypatch, capsys, tmp_path):
+    from sensorimotor.tools.cli import main
+    from sensorimotor.tools.common import MissingExtra, require
+
+    assert require("json").dumps([]) == "[]"
+    with pytest.raises(MissingExtra, match=r"pip install 'sensorimotor-embedding\[experiments\]'"):
+        require("sme_no_such_module", extra="experiments")
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # as if it were not installed
+    with pytest.raises(MissingExtra, match=r"'matplotlib'.*pip install 'sensorimotor-embedding\[experiments\]'"):
+        require("matplotlib")
+    # a command that needs it fails at once, with exit status 1 and the install line
+    assert main(["reproduce", "gridworld", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "sme reproduce: this command needs 'matplotlib'" in err
+    assert "pip install 'sensorimotor-embedding[experiments]'" in err
+    assert not any(tmp_path.iterdir())  # nothing ran
+
+
+def stops_cleanly_after_one_line(proc: subprocess.Popen, timeout: float = 30.0) -> tuple[int, str]:
+    """Read one line of `proc`'s stdout, close the pipe as `head -1` would, and wait for the exit."""
+    first = proc.stdout.readline()
+    assert first, proc.stderr.read()
+    proc.stdout.close()
+    try:
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        pytest.fail(f"still running {timeout} s after its reader went away")
+    return proc.returncode, proc.stderr.read()
+
+
+@pytest.mark.integration
+def test_watch_json_into_a_reader_that_closes_after_one_line(procs, endpoint):
+    procs.start("agent", "--listen", endpoint, "-q")
+    procs.start("world", "gridworld", "--id", "g1", "--connect", endpoint, "-q")
+    watch = procs.start("watch", "--json", "--connect", endpoint)
+    code, err = stops_cleanly_after_one_line(watch, timeout=120)
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
+    assert code == 1  # the output was cut short: as the Python docs' recipe for EPIPE
+
+
+def test_demo_into_a_reader_that_closes_after_one_line(endpoint):
+    demo = subprocess.Popen([sys.executable, "-m", "sensorimotor.tools.cli", "demo", "--seconds", "120",
+                             "--listen", endpoint], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    code, err = stops_cleanly_after_one_line(demo, timeout=60)
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
+    assert code == 1

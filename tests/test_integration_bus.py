@@ -6,34 +6,22 @@ import json
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol import sme_v1_pb2 as pb
-from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.protocol.bus import Bus, BusConfig
 from sensorimotor.protocol.messages import (
     AgentEvent, AgentStatus, Control, EventKind, Observation, WorldEventKind,
 )
-from tests.conftest import wait_for
+from tests.conftest import Lines, wait_for
+from tests.conftest import agent_status as status
+from tests.conftest import world_link as link
 
 pytestmark = pytest.mark.integration
-
-
-def status(ep: str) -> AgentStatus | None:
-    try:
-        with Bus(BusConfig.for_role("tool", ep)) as bus:
-            r = bus.get(keys.agent_status("a0"), timeout=2.0)
-            return codec.decode(AgentStatus, r[0].payload) if r else None
-    except BusError:
-        return None  # the agent is not up (yet)
-
-
-def link(st: AgentStatus | None, wid: str):
-    if st is None:
-        return None
-    return next((ln for ln in st.links if ln.world_id == wid), None)
 
 
 def read_json_lines(proc, n, timeout):
@@ -85,7 +73,9 @@ def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
     events: list[AgentEvent] = []
     with Bus(BusConfig.for_role("world", endpoint)) as bus:
         bus.subscribe(keys.agent_event("a0", "g2"), lambda m: events.append(codec.decode(AgentEvent, m.payload)))
-        time.sleep(0.5)
+        # a round trip through the router on this session: the router has taken the subscription
+        # (declared before the query on the same link) when the reply comes back
+        assert bus.get(keys.agent_status("a0"), timeout=10.0)
         key = keys.world_obs("g2")
         good = Observation("g2", 0, 10**9, 0, {"state": np.array([1], np.int32)}, 0.0, False, -1, 0.0, "x")
         wrong_shape = Observation("g2", 0, 10**9, 0, {"state": np.array([1, 2], np.int32)}, 0.0, False)
@@ -96,11 +86,13 @@ def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
         oversize = p.SerializeToString()
         p = pb.Observation(schema_version=99, world_id="g2", step=5)
         unknown = p.SerializeToString()
-        for payload in (b"\x07garbage\xff", codec.encode(wrong_shape), nan_reward, oversize, unknown):
+        def rejected() -> int:
+            return sum(e.kind == "bad_input" for e in list(events))
+
+        for i, payload in enumerate((b"\x07garbage\xff", codec.encode(wrong_shape), nan_reward, oversize, unknown)):
             bus.put(key, payload, "sme.v1.Observation")
-            time.sleep(0.3)
+            assert wait_for(lambda: rejected() >= i + 1, 30), (i, events)  # one at a time: each its own event
         assert codec.encode(good)  # a valid message still encodes fine
-        wait_for(lambda: len([e for e in events if e.kind == "bad_input"]) >= 5, 10)
     kinds = {e.reason for e in events if e.kind == "bad_input"}
     assert kinds == {"malformed", "spec_mismatch", "non_finite", "oversize", "unknown_version"}, events
     st = status(endpoint)
@@ -132,8 +124,9 @@ def test_status_and_watch_fail_clearly_without_agent(procs, endpoint):
 
 def test_world_waits_for_agent_and_stops_on_sigterm(procs, endpoint):
     world = procs.start("world", "gridworld", "--id", "g3", "--connect", endpoint, "-q")
-    time.sleep(1.5)
-    assert world.poll() is None  # keeps retrying, no crash
+    err = Lines(world.stderr)
+    assert wait_for(lambda: err.has("waiting for the agent") or world.poll() is not None, 60), err.lines
+    assert world.poll() is None  # it is in its retry loop, no crash
     agent = procs.start("agent", "--listen", endpoint, "-q")
     assert wait_for(lambda: (ln := link(status(endpoint), "g3")) is not None and ln.steps > 100, 30)
     assert procs.stop(world, signal.SIGTERM) == 0
@@ -145,7 +138,10 @@ def test_daemon_checkpoint_resumes_after_kill(procs, endpoint, tmp_path):
     agent = procs.start("agent", "--listen", endpoint, "--state-dir", state, "--checkpoint-every", "1", "-q")
     procs.start("world", "gridworld", "--id", "g4", "--connect", endpoint, "-q")
     assert wait_for(lambda: (ln := link(status(endpoint), "g4")) is not None and ln.embedding_version >= 9, 60)
-    time.sleep(1.5)
+    # a checkpoint written after that (so it holds version >= 9), then the kill
+    seen = time.time_ns()
+    assert wait_for(lambda: any(f.is_file() and not f.name.endswith(".tmp") and f.stat().st_mtime_ns > seen
+                                for f in Path(state).iterdir()), 60)
     agent.kill()
     agent.wait()
     procs.start("agent", "--listen", endpoint, "--state-dir", state, "-q")

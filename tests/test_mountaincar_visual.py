@@ -5,14 +5,13 @@ from __future__ import annotations
 
 import json
 import threading
-import time
 
 import numpy as np
 import pytest
 
 from sensorimotor.agent.programs.mountaincar import MountainCarProgram
 from sensorimotor.protocol.messages import Control
-from tests.conftest import wait_for
+from tests.conftest import Lines, wait_for
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.mountaincar import COAST, CONVERGE, FORWARD, MountainCarWorld
 from sensorimotor.worlds.mountaincar_dynamics import evaluation_states, step as car_step
@@ -123,7 +122,8 @@ def test_over_the_bus_position_embedding_evaluations_and_a_live_morph(procs, end
             rows.append(json.loads(line))
 
     threading.Thread(target=follow, daemon=True).start()
-    time.sleep(1.0)
+    watch_err = Lines(watch.stderr)
+    assert wait_for(lambda: watch_err.has("watching"), 60)  # subscribed before the world starts
     procs.start("world", "mountaincar", "--id", "mc", "--param", "n_eval=2", "--param", "max_car_steps=150",
                 "--connect", endpoint, "-q")
     assert wait_for(lambda: any(r.get("type") == "embedding" for r in rows), 120), rows[-5:]

@@ -15,7 +15,6 @@ from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params,
 from sensorimotor.protocol.params import ParamError, table_text
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from sensorimotor.tools.common import add_verbosity, setup_logging, verbosity
 
 log = logging.getLogger("sme.agent")
 
@@ -42,7 +41,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "programs: " + ", ".join(sorted(PROGRAMS)))
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)")
     add_bus_arguments(p, "agent")
-    add_verbosity(p)
     p.set_defaults(func=main_args)
 
 
@@ -105,5 +103,4 @@ def run_agent(args: argparse.Namespace) -> int:
 def main_args(args: argparse.Namespace) -> int:
     if args.list_params is not None:
         return list_params(args.list_params)
-    setup_logging(verbosity(args))
     return run_agent(args)

@@ -1,41 +1,104 @@
-"""Small helpers shared by the commands: logging, --param parsing, free ports, JSON views."""
+"""Small helpers shared by the commands: logging, verbosity flags, exit codes, optional extras,
+--param parsing, free ports, JSON views."""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import logging
 import math
+import select
 import socket
 import sys
+from types import ModuleType
 from typing import Any
 
 from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding
+from sensorimotor.protocol.params import ParamError, assignments
+
+
+# Exit statuses of every `sme` command (shown in each command's --help, honoured by cli.main).
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_CODES_EPILOG = (
+    "exit status: 0 ok; 1 runtime failure (the work could not be done, a missing optional dependency, "
+    "or the reader closed the output pipe); 2 usage error (bad arguments or parameters, or the bus "
+    "could not be opened: wrong endpoint or config, no `sme agent` to connect to); 130 interrupted "
+    "(Ctrl-C) before the command finished. Commands that run until stopped (agent, world, record, view, "
+    "demo, replay, watch without --count) finish cleanly on Ctrl-C or SIGTERM and exit with their usual status."
+)
+
+
+class UsageError(ValueError):
+    """Bad command-line input found after parsing (e.g. a malformed --param): exit status 2."""
+
+
+class MissingExtra(RuntimeError):
+    """An optional dependency is not installed; the message names the extra that provides it."""
+
+
+def require(module: str, extra: str = "experiments", package: str | None = None) -> ModuleType:
+    """Import `module`, or raise MissingExtra telling which extra of the distribution installs it.
+
+    Packages needed only by benchmarks and `sme reproduce` live in the `experiments` extra so the
+    agent and worlds install without them; the commands that need them call this at import time."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:
+        name = package or module.split(".")[0]
+        raise MissingExtra(
+            f"this command needs {name!r}, which is not installed ({e}); install the optional dependencies "
+            f"with: pip install 'sensorimotor-embedding[{extra}]'") from None
+
+
+def output_closed(stream: Any = None) -> bool:
+    """True when the reader of `stream` (default stdout) has gone away, e.g. `sme watch | head -1`
+    after head exits. Lets a printer loop that is idle stop at once instead of at its next write.
+    Pipes report POLLERR on the write end once the read end is closed; files and terminals never do."""
+    stream = sys.stdout if stream is None else stream
+    try:
+        fd = stream.fileno()
+        poller = select.poll()
+    except (AttributeError, OSError, ValueError):  # no real file descriptor, or no poll() here
+        return False
+    poller.register(fd, 0)  # POLLERR / POLLHUP are always reported
+    return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
 
 
 def setup_logging(verbosity: int = 0) -> None:
+    """Log to stderr: -1 warnings and errors only, 0 info, 1 or more debug."""
     level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
     logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s %(message)s",
                         datefmt="%H:%M:%S")
 
 
 def add_verbosity(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
-    parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+    """Add -v/--verbose and -q/--quiet (once; a parser that has them already is left alone).
+
+    Defaults are suppressed so that a nested subcommand does not reset a flag given to its parent
+    (`sme bench -q loop`); `verbosity()` supplies the defaults."""
+    if "-v" in parser._option_string_actions or "-q" in parser._option_string_actions:
+        return
+    parser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                        help="more log output (repeat for more)")
+    parser.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                        help="only warnings and errors")
 
 
 def verbosity(args: argparse.Namespace) -> int:
-    return -1 if getattr(args, "quiet", False) else getattr(args, "verbose", 0)
+    """-1 with --quiet, the number of -v given, else the command's default (`log_default`, 0)."""
+    if getattr(args, "quiet", False):
+        return -1
+    v = getattr(args, "verbose", 0)
+    return v if v else getattr(args, "log_default", 0)
 
 
 def parse_params(items: list[str] | None) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for item in items or []:
-        if "=" not in item:
-            raise SystemExit(f"--param expects key=value, got {item!r}")
-        k, v = item.split("=", 1)
-        out[k.strip()] = v.strip()
-    return out
+    """`--param k=v` items as a dict; a UsageError (exit 2) for an item without '='."""
+    try:
+        return assignments(items)
+    except ParamError as e:
+        raise UsageError(str(e)) from None
 
 
 def free_port() -> int:

@@ -14,7 +14,7 @@ from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
 from sensorimotor.protocol.messages import AgentEvent, Embedding
 from sensorimotor.protocol.params import assignments
-from sensorimotor.tools.common import add_verbosity, format_embedding, format_event, setup_logging
+from sensorimotor.tools.common import format_embedding, format_event, output_closed
 from sensorimotor.worlds.node import WorldNode
 from sensorimotor.worlds.registry import WORLDS, make_world
 
@@ -31,12 +31,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of world and agent")
     p.add_argument("--listen", default=keys.DEFAULT_ENDPOINT, metavar="ENDPOINT",
                    help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT})")
-    add_verbosity(p)
-    p.set_defaults(func=main_args)
+    p.set_defaults(func=main_args, log_default=-1)  # quiet logs unless -v: the demo prints its own progress
 
 
 def main_args(args: argparse.Namespace) -> int:
-    setup_logging(-1 if not args.verbose else args.verbose)
     if args.steps is not None and args.steps < 1:
         print("sme demo: --steps must be >= 1", file=sys.stderr)
         return 2
@@ -50,26 +48,37 @@ def main_args(args: argparse.Namespace) -> int:
     errors: list[float] = []
     t0 = time.monotonic()
 
+    stop = threading.Event()
+    broken_pipe = threading.Event()
+
+    def say(line: str) -> None:
+        """Print a progress line; if the reader closed stdout, stop the demo (from any thread)."""
+        if broken_pipe.is_set():
+            return
+        try:
+            print(line, flush=True)
+        except BrokenPipeError:
+            broken_pipe.set()
+            stop.set()
+
     def on_output(channel: str, msg: Any) -> None:
         stamp = f"{time.monotonic() - t0:6.1f}s "
         if isinstance(msg, Embedding):
             last["embedding"] = msg
-            print(stamp + format_embedding(msg), flush=True)
+            say(stamp + format_embedding(msg))
             if msg.procrustes_error is not None:
                 errors.append(msg.procrustes_error)
         elif isinstance(msg, AgentEvent) and msg.kind not in ("policy_iteration", "paused"):
-            print(stamp + format_event(msg), flush=True)
+            say(stamp + format_event(msg))
 
     try:
         agent_bus = Bus(BusConfig.for_role("agent", args.listen))
     except BusError as e:
         print(f"sme demo: {e}", file=sys.stderr)
         return 2
-    stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    print(f"sme demo: agent on {args.listen}, world {wid!r} ({world.kind}), {args.seconds:g} s; Ctrl-C stops",
-          flush=True)
+    say(f"sme demo: agent on {args.listen}, world {wid!r} ({world.kind}), {args.seconds:g} s; Ctrl-C stops")
     with agent_bus, world:
         daemon = AgentDaemon(agent_bus, seed=args.seed, on_output=on_output)
         daemon.start()
@@ -82,17 +91,22 @@ def main_args(args: argparse.Namespace) -> int:
             next_tick = 5.0
             while not stop.is_set() and time.monotonic() - t0 < args.seconds and nthread.is_alive():
                 stop.wait(0.1)
+                if output_closed():
+                    broken_pipe.set()
+                    break
                 el = time.monotonic() - t0
                 if el >= next_tick:
                     next_tick += 5.0
-                    print(f"{el:6.1f}s [{wid}] {node.stats.steps} steps ({node.stats.steps / el:,.0f}/s), "
-                          f"{node.stats.episodes} episodes", flush=True)
+                    say(f"{el:6.1f}s [{wid}] {node.stats.steps} steps ({node.stats.steps / el:,.0f}/s), "
+                        f"{node.stats.episodes} episodes")
             node.stop()
             nthread.join(timeout=5)
         daemon.stop()
         dthread.join(timeout=5)
         daemon.close()
         status = daemon.status()
+    if broken_pipe.is_set():
+        raise BrokenPipeError("stdout closed by its reader")  # cli.main turns it into a quiet exit
     el = time.monotonic() - t0
     print("\nsummary")
     print(f"  world {wid} ({world.kind}): {node.stats.steps} lockstep steps in {el:.1f} s "

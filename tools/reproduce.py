@@ -22,6 +22,8 @@ from typing import Any, Callable
 import numpy as np
 from sensorimotor.protocol.messages import Trigger
 
+from sensorimotor.tools.common import require
+
 
 def _mean_se(x: list[float] | np.ndarray) -> tuple[float, float]:
     a = np.asarray(x, dtype=np.float64)
@@ -197,8 +199,7 @@ def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2)
 
 def _plot(out: str, name: str, title: str, xlabel: str, ylabel: str, series, logy: bool = False,
           vline: float | None = None) -> None:
-    import matplotlib
-
+    matplotlib = require("matplotlib")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -321,6 +322,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main_args(args: argparse.Namespace) -> int:
+    if args.runs < 1 or args.workers < 1:
+        print("sme reproduce: --runs and --workers must be >= 1", file=sys.stderr)
+        return 2
+    require("matplotlib")  # the plots need it: say so now, not after the runs
     out = os.path.join(args.out, args.chapter)
     os.makedirs(out, exist_ok=True)
     t0 = time.time()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import signal
 import sys
 import threading
@@ -12,14 +13,24 @@ from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import AgentEvent, Embedding
-from sensorimotor.tools.common import embedding_dict, event_dict, format_embedding, format_event, print_json
+from sensorimotor.tools.common import (
+    EXIT_INTERRUPTED,
+    embedding_dict,
+    event_dict,
+    format_embedding,
+    format_event,
+    output_closed,
+    print_json,
+)
+
+log = logging.getLogger("sme.watch")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("watch", help="print embedding versions and agent events as they arrive",
                        description="Subscribe to the agent's embeddings and events and print them. Waits for "
                        "the agent if it is not up yet. Exit status 1 if --timeout passes before --count "
-                       "embeddings arrived.")
+                       "embeddings arrived (130 if Ctrl-C comes first).")
     p.add_argument("--json", action="store_true",
                    help="one JSON object per line: embeddings carry world, version, trigger, n_points, dims, "
                    "eigenvalues, procrustes_error, step, metrics; events carry kind and detail")
@@ -40,6 +51,8 @@ def main_args(args: argparse.Namespace) -> int:
         print(f"sme watch: {e}", file=sys.stderr)
         return 2
     done = threading.Event()
+    interrupted = threading.Event()
+    broken_pipe = threading.Event()  # the reader of our stdout went away (`sme watch --json | head -1`)
     seen = [0]
     lock = threading.Lock()
 
@@ -53,7 +66,12 @@ def main_args(args: argparse.Namespace) -> int:
             with lock:
                 if done.is_set():
                     return
-                show(m)
+                try:
+                    show(m)
+                except BrokenPipeError:  # raised on zenoh's thread: hand it to the main thread
+                    broken_pipe.set()
+                    done.set()
+                    return
                 if counts:
                     seen[0] += 1
                     if args.count is not None and seen[0] >= args.count:
@@ -68,19 +86,32 @@ def main_args(args: argparse.Namespace) -> int:
         on_embedding = receiver(Embedding, lambda e: print(format_embedding(e), flush=True), True)
         on_event = receiver(AgentEvent, lambda e: print(format_event(e), flush=True), False)
 
-    signal.signal(signal.SIGINT, lambda *a: done.set())
-    signal.signal(signal.SIGTERM, lambda *a: done.set())
+    def on_signal(*_: object) -> None:
+        interrupted.set()
+        done.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     with bus:
-        bus.subscribe(f"{keys.PREFIX}/agent/{args.agent}/embedding/{args.world}", on_embedding)
+        embeddings = f"{keys.PREFIX}/agent/{args.agent}/embedding/{args.world}"
+        bus.subscribe(embeddings, on_embedding)
         if not args.no_events:
             bus.subscribe(f"{keys.PREFIX}/agent/{args.agent}/event/{args.world}", on_event)
+        log.info("watching %s%s", embeddings, "" if args.no_events else " and events")
         deadline = None if args.timeout is None else time.monotonic() + args.timeout
         while not done.is_set():
             if deadline is not None and time.monotonic() >= deadline:
                 break
+            if output_closed():
+                broken_pipe.set()
+                break
             done.wait(0.1)
         done.set()
+    if broken_pipe.is_set():
+        raise BrokenPipeError("stdout closed by its reader")  # cli.main turns it into a quiet exit
     if args.count is not None and seen[0] < args.count:
+        if interrupted.is_set():
+            return EXIT_INTERRUPTED
         print(f"sme watch: timed out after {args.timeout} s with {seen[0]} of {args.count} embeddings",
               file=sys.stderr)
         return 1

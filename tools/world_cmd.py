@@ -9,7 +9,6 @@ import sys
 
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.params import ParamError, assignments, table_text
-from sensorimotor.tools.common import add_verbosity, setup_logging, verbosity
 from sensorimotor.worlds.node import WorldNode
 from sensorimotor.worlds.registry import WORLDS, make_world, world_kind
 
@@ -38,7 +37,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="write loop statistics (steps, steps/s, round-trip p50/p99) as JSON when done")
     p.add_argument("--warmup", type=int, default=200, help="steps excluded from latency statistics")
     add_bus_arguments(p, "world")
-    add_verbosity(p)
     p.set_defaults(func=main_args)
 
 
@@ -57,7 +55,6 @@ def list_params(name: str | None) -> int:
 def main_args(args: argparse.Namespace) -> int:
     if args.list_params:
         return list_params(args.name)
-    setup_logging(verbosity(args))
     if not args.name:
         print("sme world: a world NAME is required (one of " + ", ".join(sorted(WORLDS)) + ")", file=sys.stderr)
         return 2

@@ -40,8 +40,11 @@ def verge(k: int, action: np.ndarray, k_max: int) -> int:
 
 
 def noise_texture(path: str, size: int, seed: int, sigmas: tuple[float, ...], tint: tuple[float, float, float]) -> None:
-    """Write a square PNG of smooth noise (Gaussian-filtered, one octave per sigma in texels), tinted."""
-    from matplotlib.image import imsave
+    """Write a square PNG of smooth noise (Gaussian-filtered, one octave per sigma in texels), tinted.
+
+    Stored as 8-bit RGBA, each channel (x * 255) truncated and alpha 255: the pixels matplotlib's
+    `imsave` wrote for the same array, so the textures (and what the robot sees) stay as they were."""
+    from PIL import Image
     from scipy.ndimage import gaussian_filter
 
     rng = np.random.default_rng(seed)
@@ -50,7 +53,11 @@ def noise_texture(path: str, size: int, seed: int, sigmas: tuple[float, ...], ti
         n = gaussian_filter(rng.standard_normal((size, size)), sigma, mode="wrap")
         img += n / n.std()
     img = (img - img.min()) / (img.max() - img.min())
-    imsave(path, np.clip(img[..., None] * np.asarray(tint)[None, None, :], 0.0, 1.0))
+    rgb = np.clip(img[..., None] * np.asarray(tint)[None, None, :], 0.0, 1.0)
+    rgba = np.empty((size, size, 4), np.uint8)
+    rgba[..., :3] = (rgb * 255).astype(np.uint8)
+    rgba[..., 3] = 255
+    Image.fromarray(rgba, "RGBA").save(path, format="png")
 
 
 def foveal_difference(left: np.ndarray, right: np.ndarray) -> float:

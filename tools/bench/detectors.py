@@ -12,6 +12,7 @@ from typing import Callable
 import numpy as np
 
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
+from sensorimotor.tools.common import require
 
 
 class _River:
@@ -27,7 +28,7 @@ class _River:
 
 
 def candidates() -> dict[str, Callable[[], object]]:
-    from river import drift
+    drift = require("river.drift", package="river")
 
     out: dict[str, Callable[[], object]] = {name: cls for name, cls in DETECTORS.items()}
     out["river.ADWIN"] = lambda: _River(drift.ADWIN, "river.ADWIN")

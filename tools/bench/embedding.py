@@ -22,6 +22,7 @@ import numpy as np
 from sensorimotor.agent.embedding import (
     classical_mds, landmark_trace_embedding, procrustes_error, trace_distances,
 )
+from sensorimotor.tools.common import require
 
 
 def continuous_traces(n: int, L: int = 100, seed: int = 0) -> tuple[list[np.ndarray], np.ndarray]:
@@ -64,7 +65,8 @@ def row(method: str, kind: str, n: int, sec: float, mb: float, err: float | None
 
 
 def run(sizes: list[int], landmark_n: int, smacof_max: int, exact_landmark: bool, kinds: list[str]) -> list[dict]:
-    from sklearn.manifold import MDS, ClassicalMDS, Isomap
+    manifold = require("sklearn.manifold", package="scikit-learn")
+    MDS, ClassicalMDS, Isomap = manifold.MDS, manifold.ClassicalMDS, manifold.Isomap
 
     rows: list[dict] = []
     trace_distances(continuous_traces(50)[0])  # compile the kernels outside the measurements
