@@ -181,8 +181,9 @@ def test_usage_errors_exit_2_with_a_message(capsys):
 
     assert main(["perturb", "heal", "--world", "g1", "--param", "novalue"]) == 2
     assert "sme perturb: --param expects key=value" in capsys.readouterr().err
+    assert main(["world"]) == 2  # a NAME is required unless --list-params
     with pytest.raises(SystemExit) as e:  # argparse's own errors
-        main(["world"])
+        main(["world", "gridworld", "--steps", "many"])
     assert e.value.code == 2
 
 
