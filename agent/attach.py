@@ -8,8 +8,9 @@ world resumes its old link (`same_body`), which program and detector a new link 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DropDetector, make_detector
 from sensorimotor.agent.link import Publish, WorldLink
@@ -54,7 +55,7 @@ class AgentConfig:
         return AttachConfig(self.seed, self.detector, name, {k: format_value(v) for k, v in params.items()})
 
     @classmethod
-    def from_attach(cls, agent_id: str, cfg: AttachConfig) -> "AgentConfig":
+    def from_attach(cls, agent_id: str, cfg: AttachConfig) -> AgentConfig:
         """The configuration recorded in an `attached` event (offline replay)."""
         return cls(agent_id, cfg.seed, cfg.detector or DEFAULT_DETECTOR, {cfg.program: dict(cfg.program_params)})
 

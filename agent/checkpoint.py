@@ -22,7 +22,7 @@ import io
 import json
 import os
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
@@ -132,7 +132,7 @@ def write_atomically(path: str, data: bytes) -> None:
 def set_aside_checkpoint(path: str, why: str) -> str:
     """Rename a checkpoint that will not be used to PATH.<why>-<UTC time> (so the next checkpoint
     does not overwrite it and a person can still look at it); returns the new path."""
-    aside = f"{path}.{why}-{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S.%fZ')}"
+    aside = f"{path}.{why}-{datetime.now(UTC).strftime('%Y%m%dT%H%M%S.%fZ')}"
     os.replace(path, aside)
     return aside
 

@@ -13,11 +13,17 @@ import os
 import queue
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from sensorimotor.agent.attach import AgentConfig, Restored, attach, program_name, same_body
 from sensorimotor.agent.checkpoint import (
-    Checkpoint, CheckpointError, encode_checkpoint, read_checkpoint, set_aside_checkpoint, write_atomically,
+    Checkpoint,
+    CheckpointError,
+    encode_checkpoint,
+    read_checkpoint,
+    set_aside_checkpoint,
+    write_atomically,
 )
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.link import WorldLink
@@ -25,10 +31,17 @@ from sensorimotor.agent.programs.registry import check_program_params, make_prog
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.params import as_strings, parse
 from sensorimotor.protocol.messages import (
-    Action, AgentEvent, AgentStatus, Embedding, EventKind, Truth, WorldEvent, WorldSpec,
+    Action,
+    AgentEvent,
+    AgentStatus,
+    Embedding,
+    EventKind,
+    Truth,
+    WorldEvent,
+    WorldSpec,
 )
+from sensorimotor.protocol.params import as_strings, parse
 
 log = logging.getLogger("sme.agent")
 
@@ -309,7 +322,7 @@ class AgentDaemon:
         except OSError as e:
             log.warning("final checkpoint failed: %s", e)
 
-    def __enter__(self) -> "AgentDaemon":
+    def __enter__(self) -> AgentDaemon:
         self.start()
         return self
 

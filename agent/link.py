@@ -8,8 +8,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -20,7 +21,16 @@ from sensorimotor.protocol import codec
 from sensorimotor.protocol.bus import Inbox
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
 from sensorimotor.protocol.messages import (
-    Action, AgentEvent, AttachConfig, Embedding, EventKind, LinkStatus, Observation, Truth, WorldEvent, WorldSpec,
+    Action,
+    AgentEvent,
+    AttachConfig,
+    Embedding,
+    EventKind,
+    LinkStatus,
+    Observation,
+    Truth,
+    WorldEvent,
+    WorldSpec,
 )
 
 log = logging.getLogger("sme.agent")

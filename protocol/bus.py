@@ -17,8 +17,9 @@ import json
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import zenoh
 
@@ -51,7 +52,7 @@ class BusConfig:
     ROLES = ("agent", "world", "tool")
 
     @classmethod
-    def for_role(cls, role: str, endpoint: str = DEFAULT_ENDPOINT) -> "BusConfig":
+    def for_role(cls, role: str, endpoint: str = DEFAULT_ENDPOINT) -> BusConfig:
         """Embedded defaults: agent = router listening on `endpoint`; world = retrying peer; tool = client."""
         if role == "agent":
             return cls(mode="router", connect=(), listen=(endpoint,))
@@ -61,7 +62,7 @@ class BusConfig:
             return cls(mode="client", connect=(endpoint,), listen=())
         raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
 
-    def zenoh_config(self) -> "zenoh.Config":
+    def zenoh_config(self) -> zenoh.Config:
         if self.mode not in ("router", "peer", "client"):
             raise BusError(f"--mode must be router, peer or client, not {self.mode!r}")
         cfg = zenoh.Config.from_file(self.config_file) if self.config_file else zenoh.Config()
@@ -205,7 +206,7 @@ class Bus:
         self._closed = False
 
     @staticmethod
-    def _open(config: BusConfig, wait_limit: float | None) -> "zenoh.Session":
+    def _open(config: BusConfig, wait_limit: float | None) -> zenoh.Session:
         zc = config.zenoh_config()
         if not (config.retry and config.mode == "client"):
             return zenoh.open(zc)
@@ -224,7 +225,7 @@ class Bus:
                 time.sleep(0.5)
 
     # context manager ---------------------------------------------------------------------------
-    def __enter__(self) -> "Bus":
+    def __enter__(self) -> Bus:
         return self
 
     def __exit__(self, *exc: Any) -> None:

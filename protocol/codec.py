@@ -8,12 +8,14 @@ tensors. Each failure raises a typed `ProtocolError` whose message says what was
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from google.protobuf.message import DecodeError
 
-from sensorimotor.protocol import errors, messages as m
+from sensorimotor.protocol import errors
+from sensorimotor.protocol import messages as m
 from sensorimotor.protocol import sme_v1_pb2 as pb
 
 MAX_MESSAGE_BYTES = 64 * 1024 * 1024

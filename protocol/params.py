@@ -338,7 +338,7 @@ def table_text(cls: type, title: str | None = None) -> str:
         body = "  (no parameters)"
     else:
         widths = [max(len(r[i]) for r in rows) for i in range(3)]
-        body = "\n".join("  " + "  ".join(c.ljust(w) for c, w in zip(r[:3], widths)) + "  " + r[3] for r in rows)
+        body = "\n".join("  " + "  ".join(c.ljust(w) for c, w in zip(r[:3], widths, strict=True)) + "  " + r[3] for r in rows)
     return f"{title}\n{body}" if title else body
 
 

@@ -12,7 +12,15 @@ from sensorimotor.agent.attach import AgentConfig, Restored, attach, same_body
 from sensorimotor.agent.link import WorldLink
 from sensorimotor.agent.programs.base import Decision, Program
 from sensorimotor.protocol.messages import (
-    Action, ActionSpace, AgentEvent, EventKind, Observation, SensorSpec, WorldEvent, WorldEventKind, WorldSpec,
+    Action,
+    ActionSpace,
+    AgentEvent,
+    EventKind,
+    Observation,
+    SensorSpec,
+    WorldEvent,
+    WorldEventKind,
+    WorldSpec,
 )
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.base import StepResult, World

@@ -16,7 +16,12 @@ import numpy as np
 import pytest
 
 from sensorimotor.agent.checkpoint import (
-    META_ENTRY, Checkpoint, CheckpointError, encode_checkpoint, read_checkpoint, write_checkpoint,
+    META_ENTRY,
+    Checkpoint,
+    CheckpointError,
+    encode_checkpoint,
+    read_checkpoint,
+    write_checkpoint,
 )
 from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.agent.detectors import DETECTORS, make_detector
@@ -43,7 +48,7 @@ def assert_same_tree(a: Any, b: Any, path: str = "state") -> None:
             assert_same_tree(a[k], b[k], f"{path}.{k}")
     elif isinstance(a, (list, tuple)):
         assert isinstance(b, (list, tuple)) and len(a) == len(b), path
-        for i, (x, y) in enumerate(zip(a, b)):
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
             assert_same_tree(x, y, f"{path}.{i}")
     else:
         assert a == b or (a != a and b != b), f"{path}: {a!r} != {b!r}"
@@ -81,11 +86,11 @@ def assert_same_outputs(a: Recorder, b: Recorder) -> int:
     """Identical decisions and outputs (embedding coordinates compared as bytes); returns the
     number of embeddings compared."""
     assert len(a.actions) == len(b.actions)
-    for x, y in zip(a.actions, b.actions):
+    for x, y in zip(a.actions, b.actions, strict=True):
         assert (x.step, x.values, x.reset, x.start) == (y.step, y.values, y.reset, y.start)
     assert [type(o) for o in a.outputs] == [type(o) for o in b.outputs]
     n = 0
-    for x, y in zip(a.outputs, b.outputs):
+    for x, y in zip(a.outputs, b.outputs, strict=True):
         if isinstance(x, Embedding):
             n += 1
             assert (x.version, x.trigger, x.ids, x.eigenvalues, x.step, x.metrics) == (

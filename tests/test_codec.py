@@ -6,9 +6,19 @@ import pytest
 from sensorimotor.protocol import codec, errors
 from sensorimotor.protocol import sme_v1_pb2 as pb
 from sensorimotor.protocol.messages import (
-    AttachConfig, WorldEvent,
-    Action, ActionSpace, AgentEvent, AgentStatus, Control, Embedding, LinkStatus, Observation, SensorSpec,
-    Truth, WorldSpec,
+    Action,
+    ActionSpace,
+    AgentEvent,
+    AgentStatus,
+    AttachConfig,
+    Control,
+    Embedding,
+    LinkStatus,
+    Observation,
+    SensorSpec,
+    Truth,
+    WorldEvent,
+    WorldSpec,
 )
 
 

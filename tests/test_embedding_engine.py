@@ -6,8 +6,14 @@ import pytest
 from scipy.spatial.distance import cdist
 
 from sensorimotor.agent.embedding import (
-    PreparedTraces, classical_mds, landmark_mds, landmark_trace_embedding, procrustes_error, trace_cross_distances,
-    trace_distances, update_trace_distances,
+    PreparedTraces,
+    classical_mds,
+    landmark_mds,
+    landmark_trace_embedding,
+    procrustes_error,
+    trace_cross_distances,
+    trace_distances,
+    update_trace_distances,
 )
 from sensorimotor.agent.embedding import trace_kernels as K
 from tests.test_embedding_math import naive_edit, naive_padded

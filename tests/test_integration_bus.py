@@ -15,7 +15,12 @@ from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol import sme_v1_pb2 as pb
 from sensorimotor.protocol.bus import Bus, BusConfig
 from sensorimotor.protocol.messages import (
-    AgentEvent, AgentStatus, Control, EventKind, Observation, WorldEventKind,
+    AgentEvent,
+    AgentStatus,
+    Control,
+    EventKind,
+    Observation,
+    WorldEventKind,
 )
 from tests.conftest import Lines, wait_for
 from tests.conftest import agent_status as status
@@ -91,7 +96,8 @@ def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
 
         for i, payload in enumerate((b"\x07garbage\xff", codec.encode(wrong_shape), nan_reward, oversize, unknown)):
             bus.put(key, payload, "sme.v1.Observation")
-            assert wait_for(lambda: rejected() >= i + 1, 30), (i, events)  # one at a time: each its own event
+            # one at a time: each its own event
+            assert wait_for(lambda: rejected() >= i + 1, 30), (i, events)  # noqa: B023 (called at once)
         assert codec.encode(good)  # a valid message still encodes fine
     kinds = {e.reason for e in events if e.kind == "bad_input"}
     assert kinds == {"malformed", "spec_mismatch", "non_finite", "oversize", "unknown_version"}, events

@@ -34,7 +34,7 @@ def steps_to_goal(agent, rng, starts=20, cap=2000):
     total = 0
     for _ in range(starts):
         x, v = random_state(rng)
-        for t in range(cap):
+        for t in range(cap):  # noqa: B007 (t counts the steps taken, read after the loop)
             x, v, done = step(x, v, agent.act(np.array([x, v])) - 1)
             if done:
                 break

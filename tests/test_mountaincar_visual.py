@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from sensorimotor.agent.programs.mountaincar import MountainCarProgram
-from sensorimotor.protocol.messages import Control
-from tests.conftest import Lines, wait_for
+from sensorimotor.protocol.messages import Control, Trigger
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.mountaincar import COAST, CONVERGE, FORWARD, MountainCarWorld
-from sensorimotor.worlds.mountaincar_dynamics import evaluation_states, step as car_step
-from sensorimotor.protocol.messages import Trigger
+from sensorimotor.worlds.mountaincar_dynamics import evaluation_states
+from sensorimotor.worlds.mountaincar_dynamics import step as car_step
+from tests.conftest import Lines, wait_for
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, make_program, program_params
-from sensorimotor.protocol.params import (ParamError, assignments, cast_values, describe, option, parse, table_markdown,
-                                          table_text)
+from sensorimotor.protocol.params import (
+    ParamError,
+    assignments,
+    cast_values,
+    describe,
+    option,
+    parse,
+    table_markdown,
+    table_text,
+)
 from sensorimotor.worlds.registry import WORLDS, make_world, parse_world_params, world_params
 from tests.conftest import ROOT
 

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from sensorimotor.tools.experiments import retina as R
 from sensorimotor.protocol.messages import Trigger
+from sensorimotor.tools.experiments import retina as R
 
 
 def test_saccades_and_geometry_improve_with_training():
@@ -34,5 +34,5 @@ def test_lesion_robust_rule_ends_above_basic_rule():
         r = R.perturbation(0, "lesion", at=1000, steps=2500, rule=rule, detector=None, supersample=1,
                            exploration="gaussian", every=250, embed_every=10**9)
         assert r.world.lesion.sum() > 50
-        post[rule] = np.mean([a for s, a in zip(r.curve.steps, r.curve.activation) if s > 1000])
+        post[rule] = np.mean([a for s, a in zip(r.curve.steps, r.curve.activation, strict=True) if s > 1000])
     assert post["robust"] > post["basic"]

@@ -47,7 +47,7 @@ def test_lspi_learns_a_perfect_vergence_policy_and_a_good_depth_map(world):
     run = run_inprocess(world, p, 12000, stop_when=lambda r: len(r.embeddings) >= 9)
     perfect = [e.metrics["policy_success"] == 1.0 for e in run.embeddings]
     assert any(perfect[:9])  # a perfect policy within 9 LSPI iterations
-    best = min(e.procrustes_error for e, ok in zip(run.embeddings, perfect) if ok)
+    best = min(e.procrustes_error for e, ok in zip(run.embeddings, perfect, strict=True) if ok)
     assert best <= 0.0257  # the dissertation's figure
     assert run.embeddings[-1].coordinates.shape == (20, 1)
 

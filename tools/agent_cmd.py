@@ -12,9 +12,9 @@ from typing import Any
 from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
 from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, program_kind
-from sensorimotor.protocol.params import ParamError, table_text
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.params import ParamError, table_text
 
 log = logging.getLogger("sme.agent")
 

@@ -17,7 +17,6 @@ from typing import Any
 from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding
 from sensorimotor.protocol.params import ParamError, assignments
 
-
 # Exit statuses of every `sme` command (shown in each command's --help, honoured by cli.main).
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 EXIT_CODES_EPILOG = (

@@ -5,8 +5,9 @@ loop benchmark's baseline."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from sensorimotor.agent.attach import AgentConfig, attach
 from sensorimotor.agent.detectors import DropDetector

@@ -12,8 +12,9 @@ complete chunk, and `recover()` rewrites such a file into a complete one that ev
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import BinaryIO, Iterator
+from typing import BinaryIO
 
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader

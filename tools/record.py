@@ -70,7 +70,7 @@ class Recorder:
             except BusError as e:
                 log.debug("world %s: %s", wid, e)
 
-    def start(self) -> "Recorder":
+    def start(self) -> Recorder:
         self._thread.start()
         self.bus.subscribe(self.key_expr, self._on)
         if self.key_expr in (keys.ALL, f"{keys.PREFIX}/**"):
@@ -108,7 +108,7 @@ class Recorder:
         self._sink.finish()
         self._file.close()
 
-    def __enter__(self) -> "Recorder":
+    def __enter__(self) -> Recorder:
         return self.start()
 
     def __exit__(self, *exc: Any) -> None:

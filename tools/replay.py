@@ -23,10 +23,9 @@ import re
 import sys
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
-from typing import Any, Iterable
-
-
+from typing import Any
 
 from sensorimotor.agent.attach import AgentConfig, attach
 from sensorimotor.agent.detectors import DETECTORS
@@ -35,7 +34,14 @@ from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import (
-    Action, AgentEvent, AttachConfig, Embedding, EventKind, Observation, Truth, WorldSpec,
+    Action,
+    AgentEvent,
+    AttachConfig,
+    Embedding,
+    EventKind,
+    Observation,
+    Truth,
+    WorldSpec,
 )
 from sensorimotor.tools.common import describe_trigger, embedding_dict, print_json
 from sensorimotor.tools.mcap_io import Record, read

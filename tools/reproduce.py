@@ -17,11 +17,12 @@ import multiprocessing as mp
 import os
 import sys
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
-from sensorimotor.protocol.messages import Trigger
 
+from sensorimotor.protocol.messages import Trigger
 from sensorimotor.tools.common import require
 
 
@@ -161,7 +162,7 @@ def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2)
     geo0 = _mean_se([r["geometry"][0] for r in learning])
     geo = _mean_se([r["geometry"][-1] for r in learning])
     end = {rule: _mean_se([np.mean(r["activation"][-4:]) for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")}
-    post = {rule: _mean_se([np.mean([a for s, a in zip(r["steps"], r["activation"]) if s > les["at"]])
+    post = {rule: _mean_se([np.mean([a for s, a in zip(r["steps"], r["activation"], strict=True) if s > les["at"]])
                             for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")}
     delays = [r["detection_delay"] for r in reversal]
     relearn = [r["relearn_episodes"] for r in reversal]

@@ -33,7 +33,8 @@ import numpy as np
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import option, parse
 from sensorimotor.worlds.base import PerturbationError, StepResult
-from sensorimotor.worlds.mountaincar_dynamics import EVAL_SEED, MountainCarParams, evaluation_states, random_state, step as car_step
+from sensorimotor.worlds.mountaincar_dynamics import EVAL_SEED, MountainCarParams, evaluation_states, random_state
+from sensorimotor.worlds.mountaincar_dynamics import step as car_step
 from sensorimotor.worlds.vergence import VergenceWorld, VergenceWorldParams, verge
 
 CONVERGE, DIVERGE, REVERSE, COAST, FORWARD = range(5)

@@ -23,7 +23,13 @@ from sensorimotor.protocol import codec, images, keys
 from sensorimotor.protocol.bus import Bus, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import (
-    Action, Control, Observation, Truth, WorldEvent, WorldEventKind, WorldSpec,
+    Action,
+    Control,
+    Observation,
+    Truth,
+    WorldEvent,
+    WorldEventKind,
+    WorldSpec,
 )
 from sensorimotor.worlds.base import PerturbationError, World
 from sensorimotor.worlds.lockstep import Lockstep

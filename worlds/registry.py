@@ -6,10 +6,11 @@ World modules are imported lazily (PyBullet loads only for the worlds that need 
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
-from sensorimotor.protocol.params import ParamError, unknown_name, parse
+from sensorimotor.protocol.params import ParamError, parse, unknown_name
 from sensorimotor.worlds.base import World
 
 

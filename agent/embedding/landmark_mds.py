@@ -8,8 +8,8 @@ Cost: O(n m) trace comparisons and an m x m eigenproblem instead of O(n^2) and n
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

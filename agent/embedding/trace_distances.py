@@ -14,7 +14,7 @@ cores). `dtype=np.float32` halves the n x n matrix.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -151,7 +151,7 @@ class PreparedTraces:
             self._X = pad_traces(arrs, pad)
             self._lens = np.array([a.shape[0] for a in arrs])
 
-    def subset(self, rows: np.ndarray) -> "PreparedTraces":
+    def subset(self, rows: np.ndarray) -> PreparedTraces:
         """The traces at `rows`, prepared (copied once)."""
         sub = object.__new__(PreparedTraces)
         sub.kind, sub.pad, sub.substitution_cost, sub.n = self.kind, self.pad, self.substitution_cost, len(rows)

@@ -1,7 +1,7 @@
 """Learners: one algorithm per file."""
 
-from sensorimotor.agent.learners.lspi import LSPI, RBFBasis, TabularBasis
 from sensorimotor.agent.learners.kalman_velocity import VelocityFilter
+from sensorimotor.agent.learners.lspi import LSPI, RBFBasis, TabularBasis
 from sensorimotor.agent.learners.saccade import SaccadeLearner
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 

@@ -99,7 +99,7 @@ class GridworldProgram(Program):
         if D is None or len(prev) != len(traces):
             D = trace_distances(traces, kind="edit", substitution_cost=self.substitution_cost)
         else:
-            changed = [i for i, (a, b) in enumerate(zip(prev, traces)) if a != b]
+            changed = [i for i, (a, b) in enumerate(zip(prev, traces, strict=False)) if a != b]
             D = update_trace_distances(D, traces, changed, kind="edit", substitution_cost=self.substitution_cost)
         self._last_traces, self._D = [list(t) for t in traces], D
         mds = classical_mds(D, self.dims)

@@ -6,12 +6,13 @@ before anything runs, so a daemon never meets an unknown key when a world attach
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 from sensorimotor.agent.programs.base import Program
-from sensorimotor.protocol.params import ParamError, unknown_name, cast_values
 from sensorimotor.protocol.messages import WorldSpec
+from sensorimotor.protocol.params import ParamError, cast_values, unknown_name
 
 
 @dataclass(frozen=True)

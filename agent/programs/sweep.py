@@ -3,7 +3,8 @@ step 2 of the algorithm (ch. 3) that every trace-embedding program shares."""
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from sensorimotor.agent.programs.base import Decision
 from sensorimotor.protocol.messages import Observation

@@ -15,12 +15,16 @@ import argparse
 import json
 import time
 import tracemalloc
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from sensorimotor.agent.embedding import (
-    classical_mds, landmark_trace_embedding, procrustes_error, trace_distances,
+    classical_mds,
+    landmark_trace_embedding,
+    procrustes_error,
+    trace_distances,
 )
 from sensorimotor.tools.common import require
 

@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
-from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, evaluation_states, random_state, step as car_step
+from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, evaluation_states, random_state
+from sensorimotor.worlds.mountaincar_dynamics import step as car_step
 
 
 @dataclass
@@ -99,7 +100,7 @@ def steps_to_goal(policy, states: np.ndarray, cap: int = 1000) -> float:
     prm = MountainCarParams()
     total = 0
     for x, v in states:
-        for t in range(1, cap + 1):
+        for t in range(1, cap + 1):  # noqa: B007 (t counts the steps taken, read after the loop)
             x, v, done = car_step(float(x), float(v), policy(np.array([x, v])) - 1, prm)
             if done:
                 break
