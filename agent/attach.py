@@ -82,9 +82,17 @@ class Attached:
     how: str
 
 
-def attach(spec: WorldSpec, config: AgentConfig, publish: Publish, *, truth: Truth | None = None,
-           previous: WorldLink | None = None, restored: Restored | None = None,
-           program: Program | None = None, detector: DropDetector | None = None) -> Attached:
+def attach(
+    spec: WorldSpec,
+    config: AgentConfig,
+    publish: Publish,
+    *,
+    truth: Truth | None = None,
+    previous: WorldLink | None = None,
+    restored: Restored | None = None,
+    program: Program | None = None,
+    detector: DropDetector | None = None,
+) -> Attached:
     """Make (or resume) the link for a world that (re)appeared with `spec`.
 
     A previous link to the same body resumes with everything it learned; otherwise the link starts
@@ -95,8 +103,11 @@ def attach(spec: WorldSpec, config: AgentConfig, publish: Publish, *, truth: Tru
     if previous is not None and same_body(previous.spec, spec):
         previous.truth = truth or previous.truth
         previous.resume(spec)
-        previous.event(EventKind.RESUMED, f"{spec.kind}: resumed with {previous.counters.steps} steps learned",
-                       reason="world_returned")
+        previous.event(
+            EventKind.RESUMED,
+            f"{spec.kind}: resumed with {previous.counters.steps} steps learned",
+            reason="world_returned",
+        )
         return Attached(previous, "resumed")
     cfg = config.for_spec(spec)
     how = "new"
@@ -112,6 +123,11 @@ def attach(spec: WorldSpec, config: AgentConfig, publish: Publish, *, truth: Tru
     link = WorldLink(config.agent_id, spec, program, publish, detector)
     link.truth = truth
     link.version = version
-    link.event(EventKind.ATTACHED, f"{spec.kind} with program {program.name} ({how}"
-               + (f" at embedding v{version})" if how == "restored" else ")"), reason=how, config=cfg)
+    link.event(
+        EventKind.ATTACHED,
+        f"{spec.kind} with program {program.name} ({how}"
+        + (f" at embedding v{version})" if how == "restored" else ")"),
+        reason=how,
+        config=cfg,
+    )
     return Attached(link, how)

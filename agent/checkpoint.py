@@ -60,7 +60,11 @@ class Checkpoint:
         """True when `spec` describes the body this state was learned on (kind, program hint,
         sensors, action space)."""
         return (self.kind, self.program, tuple(self.sensors), self.action_space) == (
-            spec.kind, spec.program, tuple(spec.sensors), spec.action_space)
+            spec.kind,
+            spec.program,
+            tuple(spec.sensors),
+            spec.action_space,
+        )
 
 
 # encoding ----------------------------------------------------------------------------------------
@@ -92,13 +96,30 @@ def encode_checkpoint(ckpt: Checkpoint) -> bytes:
     and plain values."""
     arrays: dict[str, np.ndarray] = {}
     meta = {
-        "format": FORMAT, "format_version": FORMAT_VERSION, "world_id": ckpt.world_id, "kind": ckpt.kind,
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "world_id": ckpt.world_id,
+        "kind": ckpt.kind,
         "program": ckpt.program,
-        "sensors": [{"name": s.name, "dtype": s.dtype, "shape": list(s.shape), "low": s.low, "high": s.high,
-                     "description": s.description} for s in ckpt.sensors],
-        "action_space": {"n": ckpt.action_space.n, "low": list(ckpt.action_space.low),
-                         "high": list(ckpt.action_space.high), "names": list(ckpt.action_space.names)},
-        "version": ckpt.version, "program_class": ckpt.program_class,
+        "sensors": [
+            {
+                "name": s.name,
+                "dtype": s.dtype,
+                "shape": list(s.shape),
+                "low": s.low,
+                "high": s.high,
+                "description": s.description,
+            }
+            for s in ckpt.sensors
+        ],
+        "action_space": {
+            "n": ckpt.action_space.n,
+            "low": list(ckpt.action_space.low),
+            "high": list(ckpt.action_space.high),
+            "names": list(ckpt.action_space.names),
+        },
+        "version": ckpt.version,
+        "program_class": ckpt.program_class,
         "program_params": _flatten(ckpt.program_params, "program_params", arrays),
         "program_state": _flatten(ckpt.program_state, "program_state", arrays),
         "detector_state": _flatten(ckpt.detector_state, "detector_state", arrays),
@@ -187,7 +208,9 @@ def decode_checkpoint(data: bytes) -> Checkpoint:
     except (ValueError, UnicodeDecodeError) as e:
         raise CheckpointError(f"its {META_ENTRY} entry is not valid JSON: {e}") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise CheckpointError(f"not a sensorimotor checkpoint (format {meta.get('format') if isinstance(meta, dict) else None!r})")
+        raise CheckpointError(
+            f"not a sensorimotor checkpoint (format {meta.get('format') if isinstance(meta, dict) else None!r})"
+        )
     version = meta.get("format_version")
     if version != FORMAT_VERSION:
         if isinstance(version, int) and not isinstance(version, bool) and version > FORMAT_VERSION:
@@ -196,9 +219,17 @@ def decode_checkpoint(data: bytes) -> Checkpoint:
             why = "an old or unknown format this version cannot read"
         raise CheckpointError(f"format version {version!r} is not {FORMAT_VERSION}: {why}")
     try:
-        sensors = tuple(SensorSpec(name=s["name"], dtype=s["dtype"], shape=tuple(s["shape"]), low=s["low"],
-                                   high=s["high"], description=s["description"])
-                        for s in _require(meta, "sensors", list))
+        sensors = tuple(
+            SensorSpec(
+                name=s["name"],
+                dtype=s["dtype"],
+                shape=tuple(s["shape"]),
+                low=s["low"],
+                high=s["high"],
+                description=s["description"],
+            )
+            for s in _require(meta, "sensors", list)
+        )
         a = _require(meta, "action_space", dict)
         action_space = ActionSpace(n=a["n"], low=tuple(a["low"]), high=tuple(a["high"]), names=tuple(a["names"]))
     except (KeyError, TypeError) as e:
@@ -207,9 +238,13 @@ def decode_checkpoint(data: bytes) -> Checkpoint:
     if detector is not None and not isinstance(detector, dict):
         raise CheckpointError("the entry 'detector_state' has the wrong type")
     return Checkpoint(
-        world_id=_require(meta, "world_id", str), kind=_require(meta, "kind", str),
-        program=_require(meta, "program", str), sensors=sensors, action_space=action_space,
-        version=_require(meta, "version", int), program_class=_require(meta, "program_class", str),
+        world_id=_require(meta, "world_id", str),
+        kind=_require(meta, "kind", str),
+        program=_require(meta, "program", str),
+        sensors=sensors,
+        action_space=action_space,
+        version=_require(meta, "version", int),
+        program_class=_require(meta, "program_class", str),
         program_params=_unflatten(_require(meta, "program_params", dict), arrays),
         program_state=_unflatten(_require(meta, "program_state", dict), arrays),
         detector_state=None if detector is None else _unflatten(detector, arrays),

@@ -47,11 +47,18 @@ log = logging.getLogger("sme.agent")
 
 
 class AgentDaemon:
-    def __init__(self, bus: Bus, agent_id: str = keys.DEFAULT_AGENT_ID, seed: int = 0,
-                 state_dir: str | None = None, checkpoint_every: float = 30.0,
-                 program_params: dict[str, dict[str, Any]] | None = None,
-                 on_output: Callable[[str, Any], None] | None = None, threaded_links: bool = False,
-                 detector: str = DEFAULT_DETECTOR) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        agent_id: str = keys.DEFAULT_AGENT_ID,
+        seed: int = 0,
+        state_dir: str | None = None,
+        checkpoint_every: float = 30.0,
+        program_params: dict[str, dict[str, Any]] | None = None,
+        on_output: Callable[[str, Any], None] | None = None,
+        threaded_links: bool = False,
+        detector: str = DEFAULT_DETECTOR,
+    ) -> None:
         make_detector(detector)  # fail early on an unknown name
         self.detector = detector
         self.bus = bus
@@ -178,8 +185,11 @@ class AgentDaemon:
         be overwritten by the next checkpoint. Pickles (the old NAME.pkl) are never loaded."""
         path = self._checkpoint_path(spec.world_id)
         if path and os.path.exists(os.path.join(self.state_dir, f"{spec.world_id}.pkl")):
-            log.warning("world %s: ignoring the old pickle checkpoint %s.pkl (pickles are never loaded)",
-                        spec.world_id, spec.world_id)
+            log.warning(
+                "world %s: ignoring the old pickle checkpoint %s.pkl (pickles are never loaded)",
+                spec.world_id,
+                spec.world_id,
+            )
         if not path or not os.path.exists(path):
             return None
 
@@ -197,8 +207,11 @@ class AgentDaemon:
             set_aside("bad", f"unreadable ({e})")
             return None
         if not saved.same_body(spec):
-            set_aside("other-body", f"learned on a different world body ({saved.kind}, program "
-                      f"{saved.program or saved.kind!r}) than world {spec.world_id} ({spec.kind})")
+            set_aside(
+                "other-body",
+                f"learned on a different world body ({saved.kind}, program "
+                f"{saved.program or saved.kind!r}) than world {spec.world_id} ({spec.kind})",
+            )
             return None
         try:
             program = make_program(spec, self.seed, **saved.program_params)
@@ -206,8 +219,13 @@ class AgentDaemon:
                 raise ValueError(f"it holds a {saved.program_class}, this world gets a {type(program).__name__}")
             wanted = as_strings(parse(type(program.params), self.program_params.get(program_name(spec), {})))
             if wanted != saved.program_params:
-                log.warning("checkpoint %s was made with program params %s, not %s: keeping its own (the learned "
-                            "state belongs to them)", path, saved.program_params, wanted)
+                log.warning(
+                    "checkpoint %s was made with program params %s, not %s: keeping its own (the learned "
+                    "state belongs to them)",
+                    path,
+                    saved.program_params,
+                    wanted,
+                )
             program.restore(saved.program_state)
             detector = None
             if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
@@ -227,10 +245,17 @@ class AgentDaemon:
             with link.lock:  # a consistent snapshot (copies): the file is written while the link runs on
                 program, spec = link.program, link.spec
                 ckpt = Checkpoint(
-                    world_id=wid, kind=spec.kind, program=spec.program, sensors=tuple(spec.sensors),
-                    action_space=spec.action_space, version=link.version, program_class=type(program).__name__,
-                    program_params=as_strings(program.params), program_state=program.state(),
-                    detector_state=link.detector.state() if link.detector is not None else None)
+                    world_id=wid,
+                    kind=spec.kind,
+                    program=spec.program,
+                    sensors=tuple(spec.sensors),
+                    action_space=spec.action_space,
+                    version=link.version,
+                    program_class=type(program).__name__,
+                    program_params=as_strings(program.params),
+                    program_state=program.state(),
+                    detector_state=link.detector.state() if link.detector is not None else None,
+                )
             try:
                 data = encode_checkpoint(ckpt)
             except ValueError:  # a program whose state is not arrays and plain values: a bug, not fatal
@@ -266,8 +291,15 @@ class AgentDaemon:
         self.links[wid] = att.link
         if self.threaded_links:
             att.link.start()
-        log.info("world %s %s (%s, program %s, step %d, embedding v%d)", wid, att.how, spec.kind,
-                 att.link.program.name, att.link.counters.steps, att.link.version)
+        log.info(
+            "world %s %s (%s, program %s, step %d, embedding v%d)",
+            wid,
+            att.how,
+            spec.kind,
+            att.link.program.name,
+            att.link.counters.steps,
+            att.link.version,
+        )
 
     def _attach_failed(self, wid: str, reason: str, e: Exception) -> None:
         self.counters["attach_failed"] += 1

@@ -46,8 +46,10 @@ def check_against_spec(obs: Observation, spec: WorldSpec) -> None:
         if a is None:
             raise SpecMismatch(f"observation step {obs.step} has no tensor {s.name!r} (spec declares it)")
         if a.dtype.name != s.dtype or tuple(a.shape) != tuple(s.shape):
-            raise SpecMismatch(f"observation step {obs.step}: tensor {s.name!r} is {a.dtype.name}{list(a.shape)}, "
-                               f"spec says {s.dtype}{list(s.shape)}")
+            raise SpecMismatch(
+                f"observation step {obs.step}: tensor {s.name!r} is {a.dtype.name}{list(a.shape)}, "
+                f"spec says {s.dtype}{list(s.shape)}"
+            )
 
 
 @dataclass
@@ -72,8 +74,15 @@ class WorldLink:
     EVENT_RATE = 5.0  # bad-input and error events per second at most; counters count everything
     MAX_PROGRAM_FAILURES = 20  # consecutive program failures before the link is paused
 
-    def __init__(self, agent_id: str, spec: WorldSpec, program: Program, publish: Publish,
-                 detector: DropDetector | None = None, inbox_size: int = 256) -> None:
+    def __init__(
+        self,
+        agent_id: str,
+        spec: WorldSpec,
+        program: Program,
+        publish: Publish,
+        detector: DropDetector | None = None,
+        inbox_size: int = 256,
+    ) -> None:
         self.agent_id = agent_id
         self.detector = detector
         self.spec = spec
@@ -147,11 +156,23 @@ class WorldLink:
             log.warning("world %s: rejected input (%s): %s", self.world_id, kind, detail)
             self.event(EventKind.BAD_INPUT, detail, step, {"count": float(c[kind])}, reason=kind)
 
-    def event(self, kind: str, detail: str, step: int = 0, values: dict[str, float] | None = None, *,
-              reason: str = "", config: AttachConfig | None = None) -> None:
+    def event(
+        self,
+        kind: str,
+        detail: str,
+        step: int = 0,
+        values: dict[str, float] | None = None,
+        *,
+        reason: str = "",
+        config: AttachConfig | None = None,
+    ) -> None:
         """Publish an AgentEvent about this world."""
-        self.publish("event", AgentEvent(self.agent_id, self.world_id, kind, detail, step, time.time(),
-                                         dict(values or {}), reason, config))
+        self.publish(
+            "event",
+            AgentEvent(
+                self.agent_id, self.world_id, kind, detail, step, time.time(), dict(values or {}), reason, config
+            ),
+        )
 
     def world_event(self, ev: WorldEvent) -> None:
         """A WorldEvent from this world: counted, and passed on as an agent event (rate-limited)."""
@@ -215,9 +236,13 @@ class WorldLink:
             ref = self.detector.reference
             if self.detector.update(perf):
                 c.drops += 1
-                self.event(EventKind.DROP_DETECTED, f"{self.detector.name} saw the reward drop (now {perf:.4g}, "
-                           f"reference {ref:.4g})", obs.step, {"reward": perf, "reference": ref},
-                           reason=self.detector.name)
+                self.event(
+                    EventKind.DROP_DETECTED,
+                    f"{self.detector.name} saw the reward drop (now {perf:.4g}, reference {ref:.4g})",
+                    obs.step,
+                    {"reward": perf, "reference": ref},
+                    reason=self.detector.name,
+                )
                 self.program.on_drop(obs.step)
         for item in self.program.drain():
             self._emit(item)
@@ -230,16 +255,29 @@ class WorldLink:
         self.counters.program_errors += 1
         self._failures += 1
         if self._may_event():
-            log.error("program %s failed on world %s step %d", self.program.name, self.world_id, step,
-                      exc_info=e)
-            self.event(EventKind.PROGRAM_ERROR, f"{type(e).__name__}: {e}", step,
-                       {"count": float(self.counters.program_errors)}, reason=type(e).__name__)
+            log.error("program %s failed on world %s step %d", self.program.name, self.world_id, step, exc_info=e)
+            self.event(
+                EventKind.PROGRAM_ERROR,
+                f"{type(e).__name__}: {e}",
+                step,
+                {"count": float(self.counters.program_errors)},
+                reason=type(e).__name__,
+            )
         if self._failures >= self.MAX_PROGRAM_FAILURES:
             self.state = "paused"
-            log.error("world %s: program %s failed %d times in a row; link paused", self.world_id,
-                      self.program.name, self._failures)
-            self.event(EventKind.PAUSED, f"program {self.program.name} failed {self._failures} times in a row; "
-                       "the link waits for the world to return", step, reason="program_errors")
+            log.error(
+                "world %s: program %s failed %d times in a row; link paused",
+                self.world_id,
+                self.program.name,
+                self._failures,
+            )
+            self.event(
+                EventKind.PAUSED,
+                f"program {self.program.name} failed {self._failures} times in a row; "
+                "the link waits for the world to return",
+                step,
+                reason="program_errors",
+            )
             return None
         return Decision(reset=True, start=-1)
 
@@ -251,11 +289,29 @@ class WorldLink:
             self.counters.embeddings += 1
             if err is not None:
                 self.counters.last_error = err
-            emb = Embedding(self.agent_id, self.world_id, self.version, item.trigger, item.ids,
-                            np.asarray(item.coordinates, dtype=np.float64), item.eigenvalues, err, item.step,
-                            time.time(), {**item.metrics, **scores}, item.iteration, item.drop_step)
-            log.info("world %s: embedding v%d (%s) n=%d error=%s", self.world_id, self.version, item.trigger,
-                     len(item.ids), "n/a" if err is None else f"{err:.4f}")
+            emb = Embedding(
+                self.agent_id,
+                self.world_id,
+                self.version,
+                item.trigger,
+                item.ids,
+                np.asarray(item.coordinates, dtype=np.float64),
+                item.eigenvalues,
+                err,
+                item.step,
+                time.time(),
+                {**item.metrics, **scores},
+                item.iteration,
+                item.drop_step,
+            )
+            log.info(
+                "world %s: embedding v%d (%s) n=%d error=%s",
+                self.world_id,
+                self.version,
+                item.trigger,
+                len(item.ids),
+                "n/a" if err is None else f"{err:.4f}",
+            )
             self.publish("embedding", emb)
         elif isinstance(item, EventOutput):
             self.event(item.kind, item.detail, item.step, item.values, reason=item.reason)
@@ -263,5 +319,17 @@ class WorldLink:
     def status(self) -> LinkStatus:
         c = self.counters
         stat = float(self.detector.statistic) if self.detector is not None else 0.0
-        return LinkStatus(self.world_id, self.spec.kind, self.program.name, self.state, c.steps, c.episodes,
-                          self.version, c.reward_mean, dict(c.rejected), c.last_error, stat, c.drops)
+        return LinkStatus(
+            self.world_id,
+            self.spec.kind,
+            self.program.name,
+            self.state,
+            c.steps,
+            c.episodes,
+            self.version,
+            c.reward_mean,
+            dict(c.rejected),
+            c.last_error,
+            stat,
+            c.drops,
+        )

@@ -87,18 +87,42 @@ def add_bus_arguments(parser: argparse.ArgumentParser, role: str) -> None:
     g = parser.add_argument_group(
         "zenoh", f"bus session (default for this command: {d.describe()}; no multicast, loopback only)"
     )
-    g.add_argument("--mode", choices=["router", "peer", "client"], default=None,
-                   help=f"zenoh session mode (default: {d.mode})")
-    g.add_argument("-e", "--connect", action="append", default=None, metavar="ENDPOINT",
-                   help="endpoint to connect to, repeatable (default: %s)" % (",".join(d.connect) or "none"))
-    g.add_argument("-l", "--listen", action="append", default=None, metavar="ENDPOINT",
-                   help="endpoint to listen on, repeatable (default: %s)" % (",".join(d.listen) or "none"))
-    g.add_argument("-c", "--config", default=None, metavar="FILE",
-                   help="zenoh JSON5 configuration file; the flags above override it")
-    g.add_argument("--no-multicast-scouting", action="store_true",
-                   help="disable multicast scouting (already the default; accepted for zenoh compatibility)")
-    g.add_argument("--multicast-scouting", action="store_true",
-                   help="enable multicast scouting (off by default: it reaches beyond this machine)")
+    g.add_argument(
+        "--mode", choices=["router", "peer", "client"], default=None, help=f"zenoh session mode (default: {d.mode})"
+    )
+    g.add_argument(
+        "-e",
+        "--connect",
+        action="append",
+        default=None,
+        metavar="ENDPOINT",
+        help="endpoint to connect to, repeatable (default: %s)" % (",".join(d.connect) or "none"),
+    )
+    g.add_argument(
+        "-l",
+        "--listen",
+        action="append",
+        default=None,
+        metavar="ENDPOINT",
+        help="endpoint to listen on, repeatable (default: %s)" % (",".join(d.listen) or "none"),
+    )
+    g.add_argument(
+        "-c",
+        "--config",
+        default=None,
+        metavar="FILE",
+        help="zenoh JSON5 configuration file; the flags above override it",
+    )
+    g.add_argument(
+        "--no-multicast-scouting",
+        action="store_true",
+        help="disable multicast scouting (already the default; accepted for zenoh compatibility)",
+    )
+    g.add_argument(
+        "--multicast-scouting",
+        action="store_true",
+        help="enable multicast scouting (off by default: it reaches beyond this machine)",
+    )
 
 
 def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
@@ -196,8 +220,10 @@ class Bus:
         except zenoh.ZError as e:
             hint = ""
             if config.mode == "client":
-                hint = (f" - is `sme agent` running? (this command connects to "
-                        f"{', '.join(config.connect)}; pass --connect to point elsewhere)")
+                hint = (
+                    f" - is `sme agent` running? (this command connects to "
+                    f"{', '.join(config.connect)}; pass --connect to point elsewhere)"
+                )
             elif config.mode == "router":
                 hint = f" - is another agent already listening on {', '.join(config.listen)}? (--listen picks another)"
             raise BusError(f"cannot open zenoh session ({config.describe()}): {e}{hint}") from None
@@ -219,8 +245,9 @@ class Bus:
                 if deadline is not None and time.monotonic() >= deadline:
                     raise
                 if not told:
-                    log.warning("waiting for the agent at %s (start `sme agent`; Ctrl-C gives up)",
-                                ", ".join(config.connect))
+                    log.warning(
+                        "waiting for the agent at %s (start `sme agent`; Ctrl-C gives up)", ", ".join(config.connect)
+                    )
                     told = True
                 time.sleep(0.5)
 
@@ -252,13 +279,13 @@ class Bus:
         return zenoh.Encoding.APPLICATION_PROTOBUF.with_schema(schema)
 
     # publish -----------------------------------------------------------------------------------
-    def publisher(self, key: str, schema: str | None = None, *, express: bool = True,
-                  block: bool = True) -> Publisher:
+    def publisher(self, key: str, schema: str | None = None, *, express: bool = True, block: bool = True) -> Publisher:
         """A declared publisher. `block=True` (reliable, congestion BLOCK) for lockstep traffic;
         `block=False` drops under congestion (for best-effort live views)."""
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
-        pub = self._session.declare_publisher(key, express=express, congestion_control=cc,
-                                              encoding=self.encoding(schema))
+        pub = self._session.declare_publisher(
+            key, express=express, congestion_control=cc, encoding=self.encoding(schema)
+        )
         self._declared.append(pub)
         return Publisher(pub)
 
@@ -277,8 +304,7 @@ class Bus:
         return box
 
     # query -------------------------------------------------------------------------------------
-    def queryable(self, key: str, handler: Callable[[str, bytes | None], bytes],
-                  schema: str | None = None) -> Any:
+    def queryable(self, key: str, handler: Callable[[str, bytes | None], bytes], schema: str | None = None) -> Any:
         """Answer `get`s on `key` with `handler(key, payload)`; an exception becomes an error reply."""
         enc = self.encoding(schema)
 
@@ -325,8 +351,7 @@ class Bus:
         return sub
 
     def alive(self, key: str, timeout: float = 1.0) -> list[str]:
-        return [str(r.ok.key_expr) for r in self._session.liveliness().get(key, timeout=timeout)
-                if r.ok is not None]
+        return [str(r.ok.key_expr) for r in self._session.liveliness().get(key, timeout=timeout) if r.ok is not None]
 
     def undeclare(self, entity: Any) -> None:
         try:

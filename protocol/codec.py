@@ -108,12 +108,19 @@ def _tensors_to_pb(tensors: dict[str, np.ndarray], field: Any) -> None:
 
 def _enc_spec(x: m.WorldSpec) -> pb.WorldSpec:
     p = pb.WorldSpec(
-        schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, reward_min=x.reward_min,
-        reward_max=x.reward_max, program=x.program, n_starts=x.n_starts, session=x.session,
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        kind=x.kind,
+        reward_min=x.reward_min,
+        reward_max=x.reward_max,
+        program=x.program,
+        n_starts=x.n_starts,
+        session=x.session,
     )
     for s in x.sensors:
-        p.sensors.add(name=s.name, dtype=s.dtype, shape=list(s.shape), low=s.low, high=s.high,
-                      description=s.description)
+        p.sensors.add(
+            name=s.name, dtype=s.dtype, shape=list(s.shape), low=s.low, high=s.high, description=s.description
+        )
     a = x.action_space
     p.action_space.discrete_n = a.n
     p.action_space.low.extend(a.low)
@@ -126,8 +133,16 @@ def _enc_spec(x: m.WorldSpec) -> pb.WorldSpec:
 def _enc_obs(x: m.Observation) -> pb.Observation:
     _finite(float(x.reward), "observation reward")
     p = pb.Observation(
-        schema_version=m.SCHEMA_VERSION, world_id=x.world_id, episode=x.episode, step=x.step, t=x.t,
-        timestamp=x.timestamp, reward=x.reward, done=x.done, start=x.start, session=x.session,
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        episode=x.episode,
+        step=x.step,
+        t=x.t,
+        timestamp=x.timestamp,
+        reward=x.reward,
+        done=x.done,
+        start=x.start,
+        session=x.session,
     )
     _tensors_to_pb(x.tensors, p.tensors)
     return p
@@ -136,32 +151,43 @@ def _enc_obs(x: m.Observation) -> pb.Observation:
 def _enc_act(x: m.Action) -> pb.Action:
     for v in x.values:
         _finite(float(v), "action value")
-    return pb.Action(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, step=x.step,
-                     values=[float(v) for v in x.values], reset=x.reset, start=x.start,
-                     timestamp=x.timestamp)
+    return pb.Action(
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        step=x.step,
+        values=[float(v) for v in x.values],
+        reset=x.reset,
+        start=x.start,
+        timestamp=x.timestamp,
+    )
 
 
 def _enc_ctl(x: m.Control) -> pb.Control:
-    p = pb.Control(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, id=x.id,
-                   timestamp=x.timestamp)
+    p = pb.Control(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, id=x.id, timestamp=x.timestamp)
     p.params.update({k: str(v) for k, v in x.params.items()})
     return p
 
 
 def _enc_truth(x: m.Truth) -> pb.Truth:
-    p = pb.Truth(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, step=x.step,
-                 timestamp=x.timestamp)
+    p = pb.Truth(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, kind=x.kind, step=x.step, timestamp=x.timestamp)
     _tensors_to_pb(x.tensors, p.tensors)
     return p
 
 
 def _enc_emb(x: m.Embedding) -> pb.Embedding:
     p = pb.Embedding(
-        schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, world_id=x.world_id, version=x.version,
-        trigger=x.trigger, ids=list(x.ids), eigenvalues=[float(e) for e in x.eigenvalues],
+        schema_version=m.SCHEMA_VERSION,
+        agent_id=x.agent_id,
+        world_id=x.world_id,
+        version=x.version,
+        trigger=x.trigger,
+        ids=list(x.ids),
+        eigenvalues=[float(e) for e in x.eigenvalues],
         has_procrustes=x.procrustes_error is not None,
         procrustes_error=float(x.procrustes_error) if x.procrustes_error is not None else 0.0,
-        step=x.step, timestamp=x.timestamp, iteration=x.iteration,
+        step=x.step,
+        timestamp=x.timestamp,
+        iteration=x.iteration,
     )
     if x.drop_step is not None:
         p.drop_step = x.drop_step
@@ -171,8 +197,16 @@ def _enc_emb(x: m.Embedding) -> pb.Embedding:
 
 
 def _enc_event(x: m.AgentEvent) -> pb.AgentEvent:
-    p = pb.AgentEvent(schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, world_id=x.world_id,
-                      kind=x.kind, detail=x.detail, step=x.step, timestamp=x.timestamp, reason=x.reason)
+    p = pb.AgentEvent(
+        schema_version=m.SCHEMA_VERSION,
+        agent_id=x.agent_id,
+        world_id=x.world_id,
+        kind=x.kind,
+        detail=x.detail,
+        step=x.step,
+        timestamp=x.timestamp,
+        reason=x.reason,
+    )
     p.values.update({k: float(v) for k, v in x.values.items()})
     if x.config is not None:
         c = x.config
@@ -182,18 +216,34 @@ def _enc_event(x: m.AgentEvent) -> pb.AgentEvent:
 
 
 def _enc_world_event(x: m.WorldEvent) -> pb.WorldEvent:
-    return pb.WorldEvent(schema_version=m.SCHEMA_VERSION, world_id=x.world_id, session=x.session, kind=x.kind,
-                         reason=x.reason, detail=x.detail, step=x.step, timestamp=x.timestamp)
+    return pb.WorldEvent(
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        session=x.session,
+        kind=x.kind,
+        reason=x.reason,
+        detail=x.detail,
+        step=x.step,
+        timestamp=x.timestamp,
+    )
 
 
 def _enc_status(x: m.AgentStatus) -> pb.AgentStatus:
-    p = pb.AgentStatus(schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, uptime=x.uptime,
-                       timestamp=x.timestamp)
+    p = pb.AgentStatus(schema_version=m.SCHEMA_VERSION, agent_id=x.agent_id, uptime=x.uptime, timestamp=x.timestamp)
     for ln in x.links:
-        q = p.links.add(world_id=ln.world_id, kind=ln.kind, program=ln.program, state=ln.state,
-                        steps=ln.steps, episodes=ln.episodes, embedding_version=ln.embedding_version,
-                        reward_mean=ln.reward_mean, last_procrustes_error=ln.last_procrustes_error,
-                        detector_statistic=ln.detector_statistic, drops=ln.drops)
+        q = p.links.add(
+            world_id=ln.world_id,
+            kind=ln.kind,
+            program=ln.program,
+            state=ln.state,
+            steps=ln.steps,
+            episodes=ln.episodes,
+            embedding_version=ln.embedding_version,
+            reward_mean=ln.reward_mean,
+            last_procrustes_error=ln.last_procrustes_error,
+            detector_statistic=ln.detector_statistic,
+            drops=ln.drops,
+        )
         q.rejected.update(ln.rejected)
     p.counters.update(x.counters)
     return p
@@ -212,19 +262,32 @@ def _dec_spec(p: pb.WorldSpec) -> m.WorldSpec:
     if a.discrete_n == 0 and (len(a.low) == 0 or len(a.low) != len(a.high)):
         raise errors.MalformedMessage("WorldSpec action_space: neither discrete_n > 0 nor matching low/high bounds")
     return m.WorldSpec(
-        world_id=p.world_id, kind=p.kind, sensors=tuple(sensors),
+        world_id=p.world_id,
+        kind=p.kind,
+        sensors=tuple(sensors),
         action_space=m.ActionSpace(a.discrete_n, tuple(a.low), tuple(a.high), tuple(a.names)),
-        reward_min=p.reward_min, reward_max=p.reward_max, program=p.program, n_starts=p.n_starts,
-        params=dict(p.params), session=p.session,
+        reward_min=p.reward_min,
+        reward_max=p.reward_max,
+        program=p.program,
+        n_starts=p.n_starts,
+        params=dict(p.params),
+        session=p.session,
     )
 
 
 def _dec_obs(p: pb.Observation) -> m.Observation:
     where = f"Observation(world={p.world_id!r}, step={p.step})"
     return m.Observation(
-        world_id=p.world_id, episode=p.episode, step=p.step, t=p.t,
-        tensors=_tensors_from_pb(p.tensors, where), reward=_finite(p.reward, f"{where} reward"),
-        done=p.done, start=p.start, timestamp=p.timestamp, session=p.session,
+        world_id=p.world_id,
+        episode=p.episode,
+        step=p.step,
+        t=p.t,
+        tensors=_tensors_from_pb(p.tensors, where),
+        reward=_finite(p.reward, f"{where} reward"),
+        done=p.done,
+        start=p.start,
+        timestamp=p.timestamp,
+        session=p.session,
     )
 
 
@@ -246,10 +309,18 @@ def _dec_truth(p: pb.Truth) -> m.Truth:
 def _dec_emb(p: pb.Embedding) -> m.Embedding:
     coords = _tensor_from_pb(p.coordinates, "Embedding")
     return m.Embedding(
-        agent_id=p.agent_id, world_id=p.world_id, version=p.version, trigger=p.trigger, ids=tuple(p.ids),
-        coordinates=coords, eigenvalues=tuple(p.eigenvalues),
-        procrustes_error=p.procrustes_error if p.has_procrustes else None, step=p.step,
-        timestamp=p.timestamp, metrics=dict(p.metrics), iteration=p.iteration,
+        agent_id=p.agent_id,
+        world_id=p.world_id,
+        version=p.version,
+        trigger=p.trigger,
+        ids=tuple(p.ids),
+        coordinates=coords,
+        eigenvalues=tuple(p.eigenvalues),
+        procrustes_error=p.procrustes_error if p.has_procrustes else None,
+        step=p.step,
+        timestamp=p.timestamp,
+        metrics=dict(p.metrics),
+        iteration=p.iteration,
         drop_step=p.drop_step if p.HasField("drop_step") else None,
     )
 
@@ -259,8 +330,7 @@ def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:
     if p.HasField("config"):
         c = p.config
         config = m.AttachConfig(c.seed, c.detector, c.program, dict(c.program_params))
-    return m.AgentEvent(p.agent_id, p.world_id, p.kind, p.detail, p.step, p.timestamp, dict(p.values), p.reason,
-                        config)
+    return m.AgentEvent(p.agent_id, p.world_id, p.kind, p.detail, p.step, p.timestamp, dict(p.values), p.reason, config)
 
 
 def _dec_world_event(p: pb.WorldEvent) -> m.WorldEvent:
@@ -269,9 +339,20 @@ def _dec_world_event(p: pb.WorldEvent) -> m.WorldEvent:
 
 def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
     links = tuple(
-        m.LinkStatus(ln.world_id, ln.kind, ln.program, ln.state, ln.steps, ln.episodes,
-                     ln.embedding_version, ln.reward_mean, dict(ln.rejected), ln.last_procrustes_error,
-                     ln.detector_statistic, ln.drops)
+        m.LinkStatus(
+            ln.world_id,
+            ln.kind,
+            ln.program,
+            ln.state,
+            ln.steps,
+            ln.episodes,
+            ln.embedding_version,
+            ln.reward_mean,
+            dict(ln.rejected),
+            ln.last_procrustes_error,
+            ln.detector_statistic,
+            ln.drops,
+        )
         for ln in p.links
     )
     return m.AgentStatus(p.agent_id, p.uptime, links, dict(p.counters), p.timestamp)

@@ -13,8 +13,14 @@ def encode_image(frame: np.ndarray, frame_id: str, timestamp: float) -> bytes:
     a = np.ascontiguousarray(frame)
     if a.dtype != np.uint8 or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3):
         raise ValueError(f"frames are uint8 [H, W] or [H, W, 3], got {a.dtype}{list(a.shape)}")
-    m = RawImage(width=a.shape[1], height=a.shape[0], encoding="mono8" if a.ndim == 2 else "rgb8",
-                 step=a.shape[1] * (1 if a.ndim == 2 else 3), data=a.tobytes(), frame_id=frame_id)
+    m = RawImage(
+        width=a.shape[1],
+        height=a.shape[0],
+        encoding="mono8" if a.ndim == 2 else "rgb8",
+        step=a.shape[1] * (1 if a.ndim == 2 else 3),
+        data=a.tobytes(),
+        frame_id=frame_id,
+    )
     m.timestamp.FromNanoseconds(int(timestamp * 1e9))
     return m.SerializeToString()
 

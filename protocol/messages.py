@@ -13,18 +13,18 @@ SCHEMA_VERSION = 1
 class EventKind(StrEnum):
     """The `kind` of an AgentEvent (one token on the wire; see protocol/README.md)."""
 
-    ATTACHED = "attached"                  # a link to a world was made; `config` says how
-    ATTACH_FAILED = "attach_failed"        # `reason`: no_spec, bad_spec, no_program, bad_checkpoint, ...
-    PAUSED = "paused"                      # `reason`: world_gone, program_errors
+    ATTACHED = "attached"  # a link to a world was made; `config` says how
+    ATTACH_FAILED = "attach_failed"  # `reason`: no_spec, bad_spec, no_program, bad_checkpoint, ...
+    PAUSED = "paused"  # `reason`: world_gone, program_errors
     RESUMED = "resumed"
-    BAD_INPUT = "bad_input"                # `reason`: the rejection kind (malformed, non_finite, ...)
-    DROP_DETECTED = "drop_detected"        # `reason`: the detector's name
+    BAD_INPUT = "bad_input"  # `reason`: the rejection kind (malformed, non_finite, ...)
+    DROP_DETECTED = "drop_detected"  # `reason`: the detector's name
     RELEARNING = "relearning"
     RELEARNED = "relearned"
-    PROGRAM_ERROR = "program_error"        # `reason`: the exception's type name
+    PROGRAM_ERROR = "program_error"  # `reason`: the exception's type name
     POLICY_ITERATION = "policy_iteration"
     EVALUATION = "evaluation"
-    WORLD_EVENT = "world_event"            # a WorldEvent the agent saw, `reason` = its kind
+    WORLD_EVENT = "world_event"  # a WorldEvent the agent saw, `reason` = its kind
 
 
 class Trigger(StrEnum):
@@ -33,13 +33,13 @@ class Trigger(StrEnum):
     RANDOM_POLICY = "random_policy"
     POLICY_ITERATION = "policy_iteration"  # `iteration` says which
     PERIODIC = "periodic"
-    RELEARNED = "relearned"                # after a detected drop, at `drop_step`
+    RELEARNED = "relearned"  # after a detected drop, at `drop_step`
 
 
 class WorldEventKind(StrEnum):
     """The `kind` of a WorldEvent."""
 
-    ACTION_REFUSED = "action_refused"      # the world could not apply an action; it reset the episode instead
+    ACTION_REFUSED = "action_refused"  # the world could not apply an action; it reset the episode instead
     CONTROL_APPLIED = "control_applied"
     CONTROL_REFUSED = "control_refused"
 

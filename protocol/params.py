@@ -29,8 +29,20 @@ from typing import Any, TypeVar
 
 from rapidfuzz import fuzz, process
 
-__all__ = ["ParamError", "ParamInfo", "option", "parse", "cast_values", "assignments", "describe",
-           "table_text", "table_markdown", "format_value", "suggest", "unknown_name"]
+__all__ = [
+    "ParamError",
+    "ParamInfo",
+    "option",
+    "parse",
+    "cast_values",
+    "assignments",
+    "describe",
+    "table_text",
+    "table_markdown",
+    "format_value",
+    "suggest",
+    "unknown_name",
+]
 
 P = TypeVar("P")
 
@@ -43,8 +55,14 @@ class ParamError(ValueError):
     """A parameter that is unknown, does not parse as its declared type, or is out of range."""
 
 
-def option(default: Any, doc: str, *, min: float | None = None, max: float | None = None,  # noqa: A002
-           choices: Iterable[Any] | None = None) -> Any:
+def option(
+    default: Any,
+    doc: str,
+    *,
+    min: float | None = None,
+    max: float | None = None,  # noqa: A002
+    choices: Iterable[Any] | None = None,
+) -> Any:
     """A dataclass field with its default, one-line doc and optional inclusive range or choices.
 
     Equivalent to ``field(default=default, metadata={"doc": doc, "min": min, ...})``; either form is
@@ -71,6 +89,7 @@ class ParamInfo:
 
 
 # types -----------------------------------------------------------------------------------------
+
 
 def _hints(cls: type) -> dict[str, Any]:
     if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
@@ -211,6 +230,7 @@ def _check(value: Any, meta: Mapping[str, Any]) -> str | None:
 
 # parsing ---------------------------------------------------------------------------------------
 
+
 def assignments(items: Iterable[str] | None, what: str = "--param") -> dict[str, str]:
     """`["k=v", ...]` as a dict (later items win); a ParamError for an item without '='."""
     out: dict[str, str] = {}
@@ -230,7 +250,7 @@ def suggest(key: str, valid: Iterable[str]) -> str | None:
 
 
 def unknown_name(what: str, key: str, valid: Iterable[str]) -> str:
-    """"unknown WHAT 'KEY' (did you mean 'X'?); valid: a, b, c", for refusing a name."""
+    """ "unknown WHAT 'KEY' (did you mean 'X'?); valid: a, b, c", for refusing a name."""
     valid = list(valid)
     best = suggest(key, valid)
     hint = f" (did you mean {best!r}?)" if best else ""
@@ -273,8 +293,13 @@ def cast_values(cls: type, values: Mapping[str, Any] | Iterable[str] | None, nam
     return out
 
 
-def parse(cls: type[P], values: Mapping[str, Any] | Iterable[str] | None = None, *, name: str | None = None,
-          base: P | None = None) -> P:
+def parse(
+    cls: type[P],
+    values: Mapping[str, Any] | Iterable[str] | None = None,
+    *,
+    name: str | None = None,
+    base: P | None = None,
+) -> P:
     """An instance of the parameter dataclass `cls`: `base` (default: all defaults) with `values`
     cast, checked and applied. Raises ParamError with a message naming `name` (default: the class)."""
     typed = cast_values(cls, values, name)
@@ -285,8 +310,8 @@ def parse(cls: type[P], values: Mapping[str, Any] | Iterable[str] | None = None,
     return dataclasses.replace(base, **typed)
 
 
-
 # rendering -------------------------------------------------------------------------------------
+
 
 def format_value(v: Any) -> str:
     """A value as it would be written on the command line (true, none, 1,2, 0.005)."""
@@ -312,8 +337,11 @@ def describe(cls: type) -> list[ParamInfo]:
     hints = _hints(cls)
     out = []
     for f in dataclasses.fields(cls):
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        default = (
+            f.default
+            if f.default is not dataclasses.MISSING
+            else (f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        )
         doc = str(f.metadata.get("doc", ""))
         extra = []
         if "choices" in f.metadata:
@@ -338,7 +366,9 @@ def table_text(cls: type, title: str | None = None) -> str:
         body = "  (no parameters)"
     else:
         widths = [max(len(r[i]) for r in rows) for i in range(3)]
-        body = "\n".join("  " + "  ".join(c.ljust(w) for c, w in zip(r[:3], widths, strict=True)) + "  " + r[3] for r in rows)
+        body = "\n".join(
+            "  " + "  ".join(c.ljust(w) for c, w in zip(r[:3], widths, strict=True)) + "  " + r[3] for r in rows
+        )
     return f"{title}\n{body}" if title else body
 
 

@@ -31,8 +31,14 @@ class Procs:
 
     def start(self, *args: str, stdout=subprocess.PIPE, stderr=subprocess.PIPE) -> subprocess.Popen:
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        p = subprocess.Popen([sys.executable, "-m", "sensorimotor.tools.cli", *args], cwd=ROOT, stdout=stdout, stderr=stderr,
-                             text=True, env=env)
+        p = subprocess.Popen(
+            [sys.executable, "-m", "sensorimotor.tools.cli", *args],
+            cwd=ROOT,
+            stdout=stdout,
+            stderr=stderr,
+            text=True,
+            env=env,
+        )
         self.procs.append(p)
         return p
 

@@ -34,8 +34,9 @@ class Picky(World):
     kind = "picky"
 
     def spec(self) -> WorldSpec:
-        return WorldSpec(self.world_id, self.kind, (SensorSpec("x", "float32", (1,)),), ActionSpace(n=2),
-                         program="echo", n_starts=3)
+        return WorldSpec(
+            self.world_id, self.kind, (SensorSpec("x", "float32", (1,)),), ActionSpace(n=2), program="echo", n_starts=3
+        )
 
     def reset(self, seed=None, start=None) -> StepResult:
         self.s = self.pick_start(seed, start, 3)
@@ -112,7 +113,7 @@ def test_failing_program_is_rate_limited_then_paused():
     assert link.counters.program_errors == WorldLink.MAX_PROGRAM_FAILURES
     assert 1 <= len(errors) <= WorldLink.EVENT_RATE + 1 and errors[0].reason == "RuntimeError"
     assert len(paused) == 1 and paused[0].reason == "program_errors" and link.state == "paused"
-    assert all(a is None for a in answered[WorldLink.MAX_PROGRAM_FAILURES - 1:])
+    assert all(a is None for a in answered[WorldLink.MAX_PROGRAM_FAILURES - 1 :])
     link.resume(spec)  # the world came back
     assert link.state == "attached"
 
@@ -143,8 +144,9 @@ def test_attach_new_resumed_and_restored():
     fresh = attach(other, config, lambda ch, m: out.append(m), previous=att.link)
     assert fresh.how == "new" and fresh.link is not att.link
 
-    restored = attach(spec, config, lambda ch, m: out.append(m),
-                      restored=Restored(att.link.program, 7, att.link.detector))
+    restored = attach(
+        spec, config, lambda ch, m: out.append(m), restored=Restored(att.link.program, 7, att.link.detector)
+    )
     assert restored.how == "restored" and restored.link.version == 7 and restored.link.program is att.link.program
 
 

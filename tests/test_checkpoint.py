@@ -94,7 +94,13 @@ def assert_same_outputs(a: Recorder, b: Recorder) -> int:
         if isinstance(x, Embedding):
             n += 1
             assert (x.version, x.trigger, x.ids, x.eigenvalues, x.step, x.metrics) == (
-                y.version, y.trigger, y.ids, y.eigenvalues, y.step, y.metrics)
+                y.version,
+                y.trigger,
+                y.ids,
+                y.eigenvalues,
+                y.step,
+                y.metrics,
+            )
             assert x.coordinates.dtype == y.coordinates.dtype and x.coordinates.tobytes() == y.coordinates.tobytes()
         else:
             assert (x.kind, x.detail, x.step, x.values) == (y.kind, y.detail, y.step, y.values)
@@ -125,8 +131,14 @@ CASES = {
     "vergence": (vergence, None, {"samples_per_iteration": 100}, 1500, 1500, 1),
     # reaches the driving stage (Sarsa, Kalman filter) before the checkpoint; episodes end, are
     # watched and evaluated after it
-    "mountaincar": (mountaincar, None, {"samples_per_iteration": 200, "eval_every": 40, "watch_after": 30,
-                                       "report_after": 20}, 2500, 1500, 0),
+    "mountaincar": (
+        mountaincar,
+        None,
+        {"samples_per_iteration": 200, "eval_every": 40, "watch_after": 30, "report_after": 20},
+        2500,
+        1500,
+        0,
+    ),
 }
 
 
@@ -143,8 +155,9 @@ def test_restored_program_continues_exactly(kind, tmp_path):
         detector = make_detector(DETECTOR, **program.detector_params)
         first = run_inprocess(world, program, before, detector=detector)
 
-        daemon = AgentDaemon(bus=None, seed=3, state_dir=str(tmp_path), program_params={name: params},
-                             detector=DETECTOR)
+        daemon = AgentDaemon(
+            bus=None, seed=3, state_dir=str(tmp_path), program_params={name: params}, detector=DETECTOR
+        )
         original = Recorder()
         link = WorldLink("a", spec, program, original, detector)
         link.version = len(first.embeddings)
@@ -196,8 +209,18 @@ def test_detector_restored_midstream_flags_the_same_drops(name, seed):
 
 def _ckpt(state: dict) -> Checkpoint:
     spec = GridWorld(seed=0).spec()
-    return Checkpoint(spec.world_id, spec.kind, spec.program, tuple(spec.sensors), spec.action_space, 4,
-                      "GridworldProgram", {"gamma": 0.9, "centres": (0.1, 0.2)}, state, None)
+    return Checkpoint(
+        spec.world_id,
+        spec.kind,
+        spec.program,
+        tuple(spec.sensors),
+        spec.action_space,
+        4,
+        "GridworldProgram",
+        {"gamma": 0.9, "centres": (0.1, 0.2)},
+        state,
+        None,
+    )
 
 
 def _decode(buf: io.BytesIO) -> dict:
@@ -208,10 +231,16 @@ def _decode(buf: io.BytesIO) -> dict:
 
 def test_round_trip_keeps_values_dtypes_and_big_ints(tmp_path):
     rng = np.random.default_rng(7)
-    state = {"rng": rng.bit_generator.state, "w": np.arange(6, dtype=np.float32).reshape(2, 3),
-             "ids": np.array([3, 1], dtype=np.int64), "flags": np.array([True, False]), "none": None,
-             "nan": float("nan"), "nested": {"list": [1, 2.5, "x", None, [np.zeros(2)]], "empty": np.zeros((0, 4))},
-             "np_scalar": np.float64(0.1) * 3}
+    state = {
+        "rng": rng.bit_generator.state,
+        "w": np.arange(6, dtype=np.float32).reshape(2, 3),
+        "ids": np.array([3, 1], dtype=np.int64),
+        "flags": np.array([True, False]),
+        "none": None,
+        "nan": float("nan"),
+        "nested": {"list": [1, 2.5, "x", None, [np.zeros(2)]], "empty": np.zeros((0, 4))},
+        "np_scalar": np.float64(0.1) * 3,
+    }
     path = str(tmp_path / "c.ckpt.npz")
     write_checkpoint(path, _ckpt(state))
     back = read_checkpoint(path)
@@ -226,8 +255,9 @@ def test_round_trip_keeps_values_dtypes_and_big_ints(tmp_path):
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
 
 
-@pytest.mark.parametrize("bad", [{"a.b": 1}, {1: 2}, {"__array__": "x"}, {"o": object()},
-                                 {"o": np.array([None], dtype=object)}])
+@pytest.mark.parametrize(
+    "bad", [{"a.b": 1}, {1: 2}, {"__array__": "x"}, {"o": object()}, {"o": np.array([None], dtype=object)}]
+)
 def test_state_that_is_not_plain_data_is_refused_on_write(bad):
     with pytest.raises(ValueError):
         encode_checkpoint(_ckpt(bad))
@@ -258,8 +288,9 @@ BAD_FILES = {
     "foreign_format": lambda: _with_meta(lambda m: m.update(format="something-else")),
     "missing_entry": lambda: _with_meta(lambda m: m.pop("program_state")),
     "pickle": lambda: pickle.dumps({"spec": None, "program": object(), "version": 3}),
-    "pickled_array": lambda: (lambda b: (np.savez(b, **{META_ENTRY: np.array([{"a": 1}], dtype=object)}),
-                                         b.getvalue())[1])(io.BytesIO()),
+    "pickled_array": lambda: (
+        lambda b: (np.savez(b, **{META_ENTRY: np.array([{"a": 1}], dtype=object)}), b.getvalue())[1]
+    )(io.BytesIO()),
 }
 
 

@@ -11,8 +11,13 @@ COMMANDS = [["agent"], ["world"], ["watch"], ["status"], ["demo"], ["bench"], ["
 
 @pytest.mark.parametrize("cmd", COMMANDS, ids=[" ".join(c) for c in COMMANDS])
 def test_every_command_explains_itself(cmd):
-    out = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", *cmd, "--help"], cwd=ROOT, capture_output=True,
-                         text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", *cmd, "--help"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0, out.stderr
     assert "usage: sme" in out.stdout
     if cmd[0] not in ("bench",) or len(cmd) > 1:
@@ -21,15 +26,25 @@ def test_every_command_explains_itself(cmd):
 
 def test_zenoh_flags_on_bus_commands():
     for cmd in ("agent", "world", "watch", "status"):
-        out = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", cmd, "--help"], cwd=ROOT, capture_output=True,
-                             text=True, timeout=60).stdout
+        out = subprocess.run(
+            [sys.executable, "-m", "sensorimotor.tools.cli", cmd, "--help"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        ).stdout
         for flag in ("--mode", "--connect", "--listen", "--config", "--no-multicast-scouting"):
             assert flag in out, (cmd, flag)
 
 
 def test_unknown_world_is_a_clear_error():
-    out = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "world", "nowhere"], cwd=ROOT, capture_output=True,
-                         text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", "world", "nowhere"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2 and "unknown world 'nowhere'" in out.stderr
 
 
@@ -37,9 +52,27 @@ def test_unknown_world_is_a_clear_error():
 @pytest.mark.parametrize("params,bound", [([], 0.05), (["--param", "barrier=true"], 0.10)], ids=["plain", "barrier"])
 def test_demo_ends_with_a_good_gridworld_embedding(endpoint, params, bound):
     # bounded by steps, not time: on a loaded machine 10 s may be too few LSPI iterations
-    out = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "demo", "--world", "gridworld", "--steps", "12000",
-                          "--seconds", "120", "--listen", endpoint, *params], cwd=ROOT, capture_output=True, text=True,
-                         timeout=180)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sensorimotor.tools.cli",
+            "demo",
+            "--world",
+            "gridworld",
+            "--steps",
+            "12000",
+            "--seconds",
+            "120",
+            "--listen",
+            endpoint,
+            *params,
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
     assert out.returncode == 0, out.stderr
     m = re.search(r"Procrustes error against truth ([0-9.]+)", out.stdout)
     assert m, out.stdout
@@ -48,8 +81,9 @@ def test_demo_ends_with_a_good_gridworld_embedding(endpoint, params, bound):
 
 
 def _sme(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=60)
+    return subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", *args], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
 
 
 def test_world_refuses_an_unknown_param_naming_the_valid_keys(endpoint):
@@ -59,9 +93,14 @@ def test_world_refuses_an_unknown_param_naming_the_valid_keys(endpoint):
     assert "size, barrier, actions, goal, max_episode_steps" in out.stderr
 
 
-@pytest.mark.parametrize("param,message", [("size=abc", "gridworld: size='abc' is not an int"),
-                                           ("actions=5", "gridworld: actions='5' is not one of 4, 8"),
-                                           ("size", "--param expects key=value")])
+@pytest.mark.parametrize(
+    "param,message",
+    [
+        ("size=abc", "gridworld: size='abc' is not an int"),
+        ("actions=5", "gridworld: actions='5' is not one of 4, 8"),
+        ("size", "--param expects key=value"),
+    ],
+)
 def test_world_refuses_a_bad_value(endpoint, param, message):
     out = _sme("world", "gridworld", "--param", param, "--connect", endpoint, "--steps", "1")
     assert out.returncode == 2 and message in out.stderr, out.stderr
@@ -77,13 +116,16 @@ def test_world_lists_its_params():
     assert _sme("world", "nowhere", "--list-params").returncode == 2
 
 
-@pytest.mark.parametrize("param,message", [
-    ("retna.embed_every=5", "unknown program 'retna' (did you mean 'retina'?)"),
-    ("retina.embed_evry=5", "retina: unknown parameter 'embed_evry' (did you mean 'embed_every'?)"),
-    ("retina.embed_every=abc", "retina: embed_every='abc' is not an int"),
-    ("retina.rule=fancy", "retina: rule='fancy' is not one of basic, robust"),
-    ("retina", "--program-param expects PROGRAM.KEY=VALUE"),
-])
+@pytest.mark.parametrize(
+    "param,message",
+    [
+        ("retna.embed_every=5", "unknown program 'retna' (did you mean 'retina'?)"),
+        ("retina.embed_evry=5", "retina: unknown parameter 'embed_evry' (did you mean 'embed_every'?)"),
+        ("retina.embed_every=abc", "retina: embed_every='abc' is not an int"),
+        ("retina.rule=fancy", "retina: rule='fancy' is not one of basic, robust"),
+        ("retina", "--program-param expects PROGRAM.KEY=VALUE"),
+    ],
+)
 def test_agent_validates_program_params_at_start_up(endpoint, param, message):
     out = _sme("agent", "--listen", endpoint, "--seconds", "5", "--program-param", param)
     assert out.returncode == 2 and message in out.stderr, out.stderr
@@ -108,8 +150,14 @@ def test_demo_refuses_an_unknown_param(endpoint):
 # --- the same behaviour in every command --------------------------------------------------------
 
 # the least each command needs to parse (its positional arguments)
-MINIMAL_ARGS = {"world": ["gridworld"], "perturb": ["heal", "--world", "g1"], "record": ["x.mcap"], "replay": ["x.mcap"],
-                "recover": ["a.mcap", "b.mcap"], "reproduce": ["gridworld"]}
+MINIMAL_ARGS = {
+    "world": ["gridworld"],
+    "perturb": ["heal", "--world", "g1"],
+    "record": ["x.mcap"],
+    "replay": ["x.mcap"],
+    "recover": ["a.mcap", "b.mcap"],
+    "reproduce": ["gridworld"],
+}
 
 
 def all_commands() -> list[list[str]]:
@@ -141,8 +189,22 @@ def subparser(path: list[str]):
 
 def test_the_walk_finds_every_command():
     names = {" ".join(c) for c in all_commands()}
-    assert {"agent", "world", "perturb", "watch", "status", "record", "replay", "recover", "view", "demo", "reproduce",
-            "bench", "bench loop", "bench detectors"} <= names
+    assert {
+        "agent",
+        "world",
+        "perturb",
+        "watch",
+        "status",
+        "record",
+        "replay",
+        "recover",
+        "view",
+        "demo",
+        "reproduce",
+        "bench",
+        "bench loop",
+        "bench detectors",
+    } <= names
 
 
 @pytest.mark.parametrize("path", all_commands(), ids=lambda c: " ".join(c))
@@ -171,8 +233,13 @@ def test_a_flag_given_to_a_parent_command_survives_its_subcommand():
 
 
 def test_record_accepts_q_on_the_real_command_line():
-    out = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "record", "--help", "-q"], cwd=ROOT,
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", "record", "--help", "-q"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0 and "130 interrupted" in " ".join(out.stdout.split()), out.stderr
 
 
@@ -230,8 +297,13 @@ def test_watch_json_into_a_reader_that_closes_after_one_line(procs, endpoint):
 
 
 def test_demo_into_a_reader_that_closes_after_one_line(endpoint):
-    demo = subprocess.Popen([sys.executable, "-m", "sensorimotor.tools.cli", "demo", "--seconds", "120",
-                             "--listen", endpoint], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    demo = subprocess.Popen(
+        [sys.executable, "-m", "sensorimotor.tools.cli", "demo", "--seconds", "120", "--listen", endpoint],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     code, err = stops_cleanly_after_one_line(demo, timeout=60)
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
     assert code == 1

@@ -23,9 +23,18 @@ from sensorimotor.protocol.messages import (
 
 
 def obs(**kw):
-    base = dict(world_id="w", episode=3, step=17, t=2,
-                tensors={"img": np.arange(12, dtype=np.float32).reshape(3, 4), "id": np.array([5], np.int32)},
-                reward=0.5, done=True, start=4, timestamp=12.5, session="abc")
+    base = dict(
+        world_id="w",
+        episode=3,
+        step=17,
+        t=2,
+        tensors={"img": np.arange(12, dtype=np.float32).reshape(3, 4), "id": np.array([5], np.int32)},
+        reward=0.5,
+        done=True,
+        start=4,
+        timestamp=12.5,
+        session="abc",
+    )
     base.update(kw)
     return Observation(**base)
 
@@ -33,34 +42,72 @@ def obs(**kw):
 def test_observation_round_trip_keeps_values_dtypes_and_shapes():
     o = obs()
     back = codec.decode(Observation, codec.encode(o))
-    assert (back.world_id, back.episode, back.step, back.t, back.reward, back.done, back.start, back.session) == \
-        ("w", 3, 17, 2, 0.5, True, 4, "abc")
+    assert (back.world_id, back.episode, back.step, back.t, back.reward, back.done, back.start, back.session) == (
+        "w",
+        3,
+        17,
+        2,
+        0.5,
+        True,
+        4,
+        "abc",
+    )
     for k, a in o.tensors.items():
         assert back.tensors[k].dtype == a.dtype and back.tensors[k].shape == a.shape
         np.testing.assert_array_equal(back.tensors[k], a)
     assert not back.tensors["img"].flags.writeable  # decoded arrays are read-only views
 
 
-@pytest.mark.parametrize("msg", [
-    WorldSpec("w", "gridworld", (SensorSpec("state", "int32", (1,), 0, 80, "d"),), ActionSpace(n=4, names=("u",) * 4),
-              0.0, 1.0, "gridworld", 81, {"size": "9"}, "s1"),
-    WorldSpec("r", "retina", (SensorSpec("f", "float32", (4096,)),), ActionSpace(low=(-1.0, -1.0), high=(1.0, 1.0))),
-    Action("w", 9, (1.0, -2.5), True, 3, 1.0),
-    Control("w", "lesion", {"x": "0.1"}, 7, 2.0),
-    Truth("w", "start_states", {"positions": np.random.default_rng(0).normal(size=(5, 2))}, 3, 1.0),
-    Embedding("a0", "w", 2, "policy_iteration 2", (0, 1, 2), np.eye(3)[:, :2], (3.0, 2.0, 0.1), 0.01, 99, 1.0,
-              {"m": 1.5}),
-    Embedding("a0", "w", 1, "t", (0, 1), np.zeros((2, 2)), (1.0,), None),
-    AgentEvent("a0", "w", "bad_input", "detail", 5, 1.0, {"count": 2.0}),
-    AgentEvent("a0", "w", "bad_input", "detail", 5, 1.0, {"count": 2.0}, "malformed"),
-    AgentEvent("a0", "w", "attached", "", 0, 1.0, {}, "new",
-               AttachConfig(-3, "cusum", "retina", {"embed_every": "500", "rule": "basic"})),
-    Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 0),
-    Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 123456789),
-    WorldEvent("w", "action_refused", "bad_action", "step 3: out of range", 3, "s1", 2.0),
-    AgentStatus("a0", 3.5, (LinkStatus("w", "gridworld", "gridworld", "attached", 10, 2, 1, 0.1, {"oversize": 1},
-                                       0.02),), {"unattached": 3}, 4.0),
-])
+@pytest.mark.parametrize(
+    "msg",
+    [
+        WorldSpec(
+            "w",
+            "gridworld",
+            (SensorSpec("state", "int32", (1,), 0, 80, "d"),),
+            ActionSpace(n=4, names=("u",) * 4),
+            0.0,
+            1.0,
+            "gridworld",
+            81,
+            {"size": "9"},
+            "s1",
+        ),
+        WorldSpec(
+            "r", "retina", (SensorSpec("f", "float32", (4096,)),), ActionSpace(low=(-1.0, -1.0), high=(1.0, 1.0))
+        ),
+        Action("w", 9, (1.0, -2.5), True, 3, 1.0),
+        Control("w", "lesion", {"x": "0.1"}, 7, 2.0),
+        Truth("w", "start_states", {"positions": np.random.default_rng(0).normal(size=(5, 2))}, 3, 1.0),
+        Embedding(
+            "a0", "w", 2, "policy_iteration 2", (0, 1, 2), np.eye(3)[:, :2], (3.0, 2.0, 0.1), 0.01, 99, 1.0, {"m": 1.5}
+        ),
+        Embedding("a0", "w", 1, "t", (0, 1), np.zeros((2, 2)), (1.0,), None),
+        AgentEvent("a0", "w", "bad_input", "detail", 5, 1.0, {"count": 2.0}),
+        AgentEvent("a0", "w", "bad_input", "detail", 5, 1.0, {"count": 2.0}, "malformed"),
+        AgentEvent(
+            "a0",
+            "w",
+            "attached",
+            "",
+            0,
+            1.0,
+            {},
+            "new",
+            AttachConfig(-3, "cusum", "retina", {"embed_every": "500", "rule": "basic"}),
+        ),
+        Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 0),
+        Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 123456789),
+        WorldEvent("w", "action_refused", "bad_action", "step 3: out of range", 3, "s1", 2.0),
+        AgentStatus(
+            "a0",
+            3.5,
+            (LinkStatus("w", "gridworld", "gridworld", "attached", 10, 2, 1, 0.1, {"oversize": 1}, 0.02),),
+            {"unattached": 3},
+            4.0,
+        ),
+    ],
+)
 def test_round_trip_every_message(msg):
     back = codec.decode(type(msg), codec.encode(msg))
     for f in msg.__dataclass_fields__:
@@ -142,8 +189,18 @@ def test_duplicate_tensor_names_are_malformed():
 
 
 def test_every_error_is_a_protocol_error_with_a_kind():
-    kinds = {c.kind for c in (errors.MalformedMessage, errors.UnknownVersion, errors.BadDtype, errors.ShapeMismatch,
-                              errors.OversizeMessage, errors.NonFiniteValue, errors.SpecMismatch)}
+    kinds = {
+        c.kind
+        for c in (
+            errors.MalformedMessage,
+            errors.UnknownVersion,
+            errors.BadDtype,
+            errors.ShapeMismatch,
+            errors.OversizeMessage,
+            errors.NonFiniteValue,
+            errors.SpecMismatch,
+        )
+    }
     assert len(kinds) == 7
     assert all(issubclass(c, errors.ProtocolError) for c in (errors.MalformedMessage, errors.SpecMismatch))
 

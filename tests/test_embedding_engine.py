@@ -56,7 +56,9 @@ def test_cross_distances_are_blocks_of_the_full_matrix(pad):
     np.testing.assert_allclose(trace_cross_distances(tr[:7], tr[5:], pad=pad), D[:7, 5:], atol=1e-12)
     P = PreparedTraces(tr, pad=pad)
     np.testing.assert_allclose(P.distances_to(np.array([4, 9])), D[:, [4, 9]], atol=1e-12)
-    np.testing.assert_allclose(P.subset(np.array([1, 2, 3])).distances_to(np.array([0])), D[[1, 2, 3]][:, [1]], atol=1e-12)
+    np.testing.assert_allclose(
+        P.subset(np.array([1, 2, 3])).distances_to(np.array([0])), D[[1, 2, 3]][:, [1]], atol=1e-12
+    )
 
 
 def test_edit_cross_and_incremental_update():

@@ -17,7 +17,7 @@ def naive_padded(traces, pad="append"):
             if pad == "append":
                 za[: len(a)], zb[: len(b)] = a, b
             else:
-                za[L - len(a):], zb[L - len(b):] = a, b
+                za[L - len(a) :], zb[L - len(b) :] = a, b
             D[i, j] = sum(np.linalg.norm(za[t] - zb[t]) for t in range(L))
     return D
 

@@ -65,6 +65,7 @@ def test_gridworld_rejects_bad_params():
     with pytest.raises(ValueError, match="actions"):
         GridWorld(actions=5)
     from sensorimotor.worlds.registry import make_world
+
     with pytest.raises(ValueError, match="is not an int"):
         make_world("gridworld", params={"size": "nine"})
     with pytest.raises(ValueError, match="unknown world"):

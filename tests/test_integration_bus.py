@@ -60,8 +60,15 @@ def test_three_shells_embeddings_arrive_and_improve_and_world_restart_resumes(pr
     world.wait()
     assert wait_for(lambda: (ln := link(status(endpoint), "g1")) is not None and ln.state == "paused", 15)
     world2 = procs.start("world", "gridworld", "--id", "g1", "--connect", endpoint, "-q")
-    after = wait_for(lambda: (ln := link(status(endpoint), "g1")) is not None and ln.state == "attached"
-                     and ln.steps > before.steps + 500 and ln, 30)
+    after = wait_for(
+        lambda: (
+            (ln := link(status(endpoint), "g1")) is not None
+            and ln.state == "attached"
+            and ln.steps > before.steps + 500
+            and ln
+        ),
+        30,
+    )
     assert after and after.embedding_version >= before.embedding_version
     # the learned policy survived: the next embedding is already good
     watch2 = procs.start("watch", "--json", "--no-events", "--count", "1", "--timeout", "60", "--connect", endpoint)
@@ -91,6 +98,7 @@ def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
         oversize = p.SerializeToString()
         p = pb.Observation(schema_version=99, world_id="g2", step=5)
         unknown = p.SerializeToString()
+
         def rejected() -> int:
             return sum(e.kind == "bad_input" for e in list(events))
 
@@ -113,8 +121,10 @@ def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
         time.sleep(0.5)
         bus.put(keys.world_ctl("g2"), codec.encode(Control("g2", "nosuch")), codec.schema_name(Control))
         bus.put(keys.world_event("g2"), b"\x07garbage", "sme.v1.WorldEvent")
-        assert wait_for(lambda: any(e.kind == EventKind.WORLD_EVENT and e.reason == WorldEventKind.CONTROL_REFUSED
-                                    for e in events), 20), events
+        assert wait_for(
+            lambda: any(e.kind == EventKind.WORLD_EVENT and e.reason == WorldEventKind.CONTROL_REFUSED for e in events),
+            20,
+        ), events
     assert wait_for(lambda: (status(endpoint) or AgentStatus("", 0)).counters.get("bad_world_event") == 1, 10)
     assert agent.poll() is None
 
@@ -146,15 +156,25 @@ def test_daemon_checkpoint_resumes_after_kill(procs, endpoint, tmp_path):
     assert wait_for(lambda: (ln := link(status(endpoint), "g4")) is not None and ln.embedding_version >= 9, 60)
     # a checkpoint written after that (so it holds version >= 9), then the kill
     seen = time.time_ns()
-    assert wait_for(lambda: any(f.is_file() and not f.name.endswith(".tmp") and f.stat().st_mtime_ns > seen
-                                for f in Path(state).iterdir()), 60)
+    assert wait_for(
+        lambda: any(
+            f.is_file() and not f.name.endswith(".tmp") and f.stat().st_mtime_ns > seen for f in Path(state).iterdir()
+        ),
+        60,
+    )
     agent.kill()
     agent.wait()
     procs.start("agent", "--listen", endpoint, "--state-dir", state, "-q")
     restored = wait_for(lambda: link(status(endpoint), "g4"), 30)
     assert restored.embedding_version >= 9  # numbering carries on from the checkpoint
-    ln = wait_for(lambda: (ln := link(status(endpoint), "g4")) is not None
-                  and ln.embedding_version > restored.embedding_version and ln, 60)
+    ln = wait_for(
+        lambda: (
+            (ln := link(status(endpoint), "g4")) is not None
+            and ln.embedding_version > restored.embedding_version
+            and ln
+        ),
+        60,
+    )
     assert ln and ln.last_procrustes_error < 0.05  # the first embedding after the restart is already good
 
 
@@ -176,8 +196,9 @@ def test_retina_reversal_live_detected_relearned_and_reembedded(procs, endpoint)
     pert = procs.start("perturb", "reverse", "--world", "r1", "--connect", endpoint)
     assert pert.wait(20) == 0
     t_rev = max(r["step"] for r in rows if r.get("type") == "embedding")
-    assert wait_for(lambda: any(r.get("trigger") == "relearned" for r in rows), 120), \
-        [(r.get("kind"), r.get("trigger")) for r in rows]
+    assert wait_for(lambda: any(r.get("trigger") == "relearned" for r in rows), 120), [
+        (r.get("kind"), r.get("trigger")) for r in rows
+    ]
     drops = [r for r in rows if r.get("kind") == "drop_detected"]
     assert len(drops) == 1 and drops[0]["step"] > t_rev
     assert drops[0]["step"] - t_rev <= 2 * 500 + 2 * 300  # within 300 saccades of the reversal (plus the

@@ -43,7 +43,7 @@ def test_observations_are_the_two_foveae_only_and_driving_follows_eq_8_1(world):
     assert (world.x, world.v) == car_step(x0, v0, 1)[:2] and world.k == 0  # eyes back to parallel
     with pytest.raises(ValueError):
         world.step(np.array([7]))
-    assert np.array_equal(world.starts[world.n_positions:], evaluation_states(10))
+    assert np.array_equal(world.starts[world.n_positions :], evaluation_states(10))
 
 
 @pytest.mark.parametrize("body", [{}, {"baseline": "1.4"}, {"vertical": "true"}])
@@ -112,8 +112,16 @@ def test_relearned_embedding_after_a_body_change_keeps_the_old_coordinates():
 
 @pytest.mark.integration
 def test_over_the_bus_position_embedding_evaluations_and_a_live_morph(procs, endpoint):
-    procs.start("agent", "--listen", endpoint, "-q", "--program-param", "mountaincar.eval_every=150",
-                "--program-param", "mountaincar.n_eval=2")
+    procs.start(
+        "agent",
+        "--listen",
+        endpoint,
+        "-q",
+        "--program-param",
+        "mountaincar.eval_every=150",
+        "--program-param",
+        "mountaincar.n_eval=2",
+    )
     watch = procs.start("watch", "--json", "--connect", endpoint)
     rows: list[dict] = []
 
@@ -124,8 +132,19 @@ def test_over_the_bus_position_embedding_evaluations_and_a_live_morph(procs, end
     threading.Thread(target=follow, daemon=True).start()
     watch_err = Lines(watch.stderr)
     assert wait_for(lambda: watch_err.has("watching"), 60)  # subscribed before the world starts
-    procs.start("world", "mountaincar", "--id", "mc", "--param", "n_eval=2", "--param", "max_car_steps=150",
-                "--connect", endpoint, "-q")
+    procs.start(
+        "world",
+        "mountaincar",
+        "--id",
+        "mc",
+        "--param",
+        "n_eval=2",
+        "--param",
+        "max_car_steps=150",
+        "--connect",
+        endpoint,
+        "-q",
+    )
     assert wait_for(lambda: any(r.get("type") == "embedding" for r in rows), 120), rows[-5:]
     emb = next(r for r in rows if r.get("type") == "embedding")
     assert emb["world"] == "mc" and emb["dims"] == 1 and emb["procrustes_error"] < 0.01
@@ -158,8 +177,14 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
 
     det = make_detector("cusum", **prog.detector_params)
     with w:
-        run, _ = drive(w, prog, lambda p: p.relearn_at is not None and p.phase == "drive" or p.training_steps > 52_000,
-                       detector=det, perturb=perturb, on_output=seen)
+        run, _ = drive(
+            w,
+            prog,
+            lambda p: p.relearn_at is not None and p.phase == "drive" or p.training_steps > 52_000,
+            detector=det,
+            perturb=perturb,
+            on_output=seen,
+        )
     first = run.embeddings[0]
     assert first.procrustes_error < 0.01 and len(first.ids) == w.n_positions  # 1-D position vs the true angle
     from sensorimotor.tools.experiments.mountaincar import random_agent

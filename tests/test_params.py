@@ -42,18 +42,32 @@ class Demo:
 
 # the parser ------------------------------------------------------------------------------------
 
+
 def test_defaults_and_string_values():
     assert parse(Demo) == Demo()
-    p = parse(Demo, {"size": "7", "rate": "0.25", "flag": "yes", "scene": "texture", "goal": "1,2",
-                     "centres": "0, 0.05,0.1", "limit": "5", "plain": "4"}, name="demo")
+    p = parse(
+        Demo,
+        {
+            "size": "7",
+            "rate": "0.25",
+            "flag": "yes",
+            "scene": "texture",
+            "goal": "1,2",
+            "centres": "0, 0.05,0.1",
+            "limit": "5",
+            "plain": "4",
+        },
+        name="demo",
+    )
     assert p == Demo(7, 0.25, True, "texture", (1, 2), (0.0, 0.05, 0.1), 5, 4)
     assert isinstance(p.rate, float) and isinstance(p.size, int)
 
 
 def test_k_equals_v_strings_and_typed_values():
     assert parse(Demo, ["size=5", "flag=true"]) == Demo(size=5, flag=True)
-    assert parse(Demo, {"size": 5, "rate": 1, "goal": [3, 4], "centres": (0.2,), "limit": None}) == \
-        Demo(size=5, rate=1.0, goal=(3, 4), centres=(0.2,))
+    assert parse(Demo, {"size": 5, "rate": 1, "goal": [3, 4], "centres": (0.2,), "limit": None}) == Demo(
+        size=5, rate=1.0, goal=(3, 4), centres=(0.2,)
+    )
     assert assignments(["a=1", " b = x=y "]) == {"a": "1", "b": "x=y"}
     with pytest.raises(ParamError, match="key=value"):
         assignments(["novalue"])
@@ -72,30 +86,46 @@ def test_unknown_key_names_the_valid_ones_and_suggests_the_closest():
     assert isinstance(e.value, ValueError)
 
 
-@pytest.mark.parametrize("key,raw,expect", [
-    ("size", "abc", "demo: size='abc' is not an int"),
-    ("size", "7.5", "is not an int"),
-    ("size", True, "is not an int"),
-    ("rate", "fast", "demo: rate='fast' is not a float"),
-    ("rate", "nan", "is not a float"),
-    ("rate", "inf", "is not a float"),
-    ("flag", "maybe", "flag='maybe' is not a bool"),
-    ("flag", 2, "is not a bool"),
-    ("scene", 3, "scene=3 is not a str"),
-    ("goal", "1", "goal='1' is not 2 comma-separated ints or none"),
-    ("goal", "1,2,3", "is not 2 comma-separated ints"),
-    ("goal", "a,b", "is not 2 comma-separated ints"),
-    ("centres", "0.1,x", "is not comma-separated floats"),
-    ("limit", "many", "is not an int or none"),
-])
+@pytest.mark.parametrize(
+    "key,raw,expect",
+    [
+        ("size", "abc", "demo: size='abc' is not an int"),
+        ("size", "7.5", "is not an int"),
+        ("size", True, "is not an int"),
+        ("rate", "fast", "demo: rate='fast' is not a float"),
+        ("rate", "nan", "is not a float"),
+        ("rate", "inf", "is not a float"),
+        ("flag", "maybe", "flag='maybe' is not a bool"),
+        ("flag", 2, "is not a bool"),
+        ("scene", 3, "scene=3 is not a str"),
+        ("goal", "1", "goal='1' is not 2 comma-separated ints or none"),
+        ("goal", "1,2,3", "is not 2 comma-separated ints"),
+        ("goal", "a,b", "is not 2 comma-separated ints"),
+        ("centres", "0.1,x", "is not comma-separated floats"),
+        ("limit", "many", "is not an int or none"),
+    ],
+)
 def test_bad_values_name_the_key_and_the_type(key, raw, expect):
     with pytest.raises(ParamError, match=expect.replace("(", r"\(").replace(")", r"\)")):
         parse(Demo, {key: raw}, name="demo")
 
 
-@pytest.mark.parametrize("raw,value", [("true", True), ("True", True), ("1", True), ("yes", True), ("on", True),
-                                       ("false", False), ("0", False), ("No", False), ("off", False),
-                                       (True, True), (0, False)])
+@pytest.mark.parametrize(
+    "raw,value",
+    [
+        ("true", True),
+        ("True", True),
+        ("1", True),
+        ("yes", True),
+        ("on", True),
+        ("false", False),
+        ("0", False),
+        ("No", False),
+        ("off", False),
+        (True, True),
+        (0, False),
+    ],
+)
 def test_bool(raw, value):
     assert parse(Demo, {"flag": raw}).flag is value
 
@@ -152,8 +182,11 @@ _KEYS = st.sampled_from([f.name for f in dataclasses.fields(Demo)] + ["sise", ""
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.dictionaries(_KEYS, st.text(max_size=12) | st.sampled_from(["1", "0.5", "1,2", "none", "true", "spot"]),
-                       max_size=5))
+@given(
+    st.dictionaries(
+        _KEYS, st.text(max_size=12) | st.sampled_from(["1", "0.5", "1,2", "none", "true", "spot"]), max_size=5
+    )
+)
 def test_any_string_values_give_an_instance_or_a_param_error(values):
     try:
         p = parse(Demo, values, name="demo")
@@ -172,6 +205,7 @@ def test_any_assignment_strings_give_an_instance_or_a_param_error(items):
 
 
 # every world and program -----------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("name", sorted(WORLDS))
 def test_every_world_declares_params_and_builds_from_defaults(name):
@@ -207,7 +241,9 @@ def test_world_constructors_take_keywords_or_a_params_instance():
     a = GridWorld(seed=1, size=5)
     b = GridWorld("g0", 1, GridWorldParams(size=5))
     assert a.params == b.params and (a.state_id == b.state_id).all()
-    assert GridWorld(seed=1, params=GridWorldParams(size=5), barrier=True).params == GridWorldParams(size=5, barrier=True)
+    assert GridWorld(seed=1, params=GridWorldParams(size=5), barrier=True).params == GridWorldParams(
+        size=5, barrier=True
+    )
     with pytest.raises(ValueError, match="actions=5 is not one of 4, 8"):
         GridWorld(actions=5)
 
@@ -220,18 +256,25 @@ def test_every_program_declares_params_and_builds_from_defaults(name):
     assert dataclasses.is_dataclass(P) and P.__dataclass_params__.frozen
     for f in dataclasses.fields(P):
         assert f.metadata.get("doc"), f"{name}.{f.name} has no doc"
-    world = {"gridworld": "gridworld", "retina": "retina", "vergence": "stereo", "mountaincar": "mountaincar",
-             "echo": "bench"}[name]
-    with mw(world, None, 0, {"supersample": "1"} if world == "retina" else {"n_eval": "2"} if world == "mountaincar" else {}) as w:
+    world = {
+        "gridworld": "gridworld",
+        "retina": "retina",
+        "vergence": "stereo",
+        "mountaincar": "mountaincar",
+        "echo": "bench",
+    }[name]
+    with mw(
+        world, None, 0, {"supersample": "1"} if world == "retina" else {"n_eval": "2"} if world == "mountaincar" else {}
+    ) as w:
         spec = dataclasses.replace(w.spec(), program=name)
     prog = make_program(spec, 0)
     assert prog.params == P() and type(prog).Params is P
 
 
 def test_program_params_are_validated_and_typed():
-    assert check_program_params({"retina": {"embed_every": "500", "noise_sd": "none"},
-                                 "vergence": {"centres": "0,0.1"}}) == \
-        {"retina": {"embed_every": 500, "noise_sd": None}, "vergence": {"centres": (0.0, 0.1)}}
+    assert check_program_params(
+        {"retina": {"embed_every": "500", "noise_sd": "none"}, "vergence": {"centres": "0,0.1"}}
+    ) == {"retina": {"embed_every": 500, "noise_sd": None}, "vergence": {"centres": (0.0, 0.1)}}
     assert check_program_params(None) == {}
     with pytest.raises(ParamError, match="did you mean 'retina'"):
         check_program_params({"retna": {}})
@@ -262,12 +305,14 @@ def test_agent_command_validates_before_the_bus_opens(monkeypatch, capsys):
 
 # the README ------------------------------------------------------------------------------------
 
+
 def test_readme_parameter_tables_equal_the_declarations():
     from sensorimotor.tools.params_doc import current_section, render_section
 
     readme = (ROOT / "README.md").read_text()
-    assert current_section(readme) == render_section(), \
+    assert current_section(readme) == render_section(), (
         "README parameter tables drifted: run `python -m sensorimotor.tools.params_doc README.md`"
+    )
     for name in WORLDS:
         assert f"`{name}`:" in readme
     for name in PROGRAMS:

@@ -153,20 +153,32 @@ def test_sigkilled_recorder_leaves_a_readable_file(procs, endpoint, tmp_path):
     got = len(kept)
     lag = (t_kill - kept[-1].log_time) / 1e9
     missing = settled - collections.Counter((r.topic, r.data) for r in kept)
-    print(f"SIGKILLed recorder kept {got} of {upto} messages up to the kill ({got / upto:.1%}), the last {lag:.2f} s "
-          f"before it; {sum(missing.values())} of {sum(settled.values())} received 2 s or more before it are missing")
+    print(
+        f"SIGKILLed recorder kept {got} of {upto} messages up to the kill ({got / upto:.1%}), the last {lag:.2f} s "
+        f"before it; {sum(missing.values())} of {sum(settled.values())} received 2 s or more before it are missing"
+    )
     # what is lost is the tail only: the last flush interval (0.2 s) plus what a loaded machine had not
     # yet written. Every message received 2 s or more before the kill is in the file, and so is one
     # received less than 2 s before it. (The share kept depends on how long the run was: 99.99 % of
     # 6 s idle, 93.8 % of 6 s with both cores busy, ~80 % when the kill comes after 1 s of traffic.)
     assert sum(settled.values()) >= 1000 and not missing and lag < 2.0, (got, upto, lag, sum(missing.values()))
     # replay reads it; recover makes a complete file every tool opens
-    off = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "replay", victim, "--offline"], cwd=ROOT,
-                         capture_output=True, text=True, timeout=120)
+    off = subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", "replay", victim, "--offline"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert "embeddings" in off.stderr
     fixed = str(tmp_path / "fixed.mcap")
-    rc = subprocess.run([sys.executable, "-m", "sensorimotor.tools.cli", "recover", victim, fixed], cwd=ROOT, capture_output=True,
-                        text=True, timeout=120)
+    rc = subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", "recover", victim, fixed],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert rc.returncode == 0
     from mcap.reader import make_reader
 

@@ -9,9 +9,9 @@ from sensorimotor.tools.experiments import retina as R
 def test_saccades_and_geometry_improve_with_training():
     c = R.learning(0, steps=3000, every=1000, supersample=1, n_eval=30)
     assert c.steps == [0, 1000, 2000, 3000]
-    assert c.one[0] > 30 and c.one[-1] < 11          # px of the 128-px retina
-    assert c.two[-1] < c.one[-1]                      # a second saccade corrects the first
-    assert c.geometry[-1] < 0.4 * c.geometry[0]       # E_geometry falls (Fig 4.2)
+    assert c.one[0] > 30 and c.one[-1] < 11  # px of the 128-px retina
+    assert c.two[-1] < c.one[-1]  # a second saccade corrects the first
+    assert c.geometry[-1] < 0.4 * c.geometry[0]  # E_geometry falls (Fig 4.2)
     assert c.activation[-1] > 2 * c.activation[0]
 
 
@@ -31,8 +31,18 @@ def test_reversal_is_detected_by_the_agent_relearned_and_reembedded():
 def test_lesion_robust_rule_ends_above_basic_rule():
     post = {}
     for rule in ("basic", "robust"):
-        r = R.perturbation(0, "lesion", at=1000, steps=2500, rule=rule, detector=None, supersample=1,
-                           exploration="gaussian", every=250, embed_every=10**9)
+        r = R.perturbation(
+            0,
+            "lesion",
+            at=1000,
+            steps=2500,
+            rule=rule,
+            detector=None,
+            supersample=1,
+            exploration="gaussian",
+            every=250,
+            embed_every=10**9,
+        )
         assert r.world.lesion.sum() > 50
         post[rule] = np.mean([a for s, a in zip(r.curve.steps, r.curve.activation, strict=True) if s > 1000])
     assert post["robust"] > post["basic"]

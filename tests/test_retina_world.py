@@ -75,7 +75,8 @@ def test_reverse_swaps_up_and_down(world):
     world.step(np.array([0.0, 5.0]))
     assert world.tilt == pytest.approx(-5.0)
     assert world.truth().tensors["positions"][:, 1] == pytest.approx(
-        world.saccade_for(world.centres[:, 0], world.centres[:, 1])[:, 1])  # the truth stays the healthy geometry
+        world.saccade_for(world.centres[:, 0], world.centres[:, 1])[:, 1]
+    )  # the truth stays the healthy geometry
     world.perturb(Control(world.world_id, "heal"))
     assert not world.reversed
 

@@ -47,7 +47,8 @@ def require(module: str, extra: str = "experiments", package: str | None = None)
         name = package or module.split(".")[0]
         raise MissingExtra(
             f"this command needs {name!r}, which is not installed ({e}); install the optional dependencies "
-            f"with: pip install 'sensorimotor-embedding[{extra}]'") from None
+            f"with: pip install 'sensorimotor-embedding[{extra}]'"
+        ) from None
 
 
 def output_closed(stream: Any = None) -> bool:
@@ -67,8 +68,9 @@ def output_closed(stream: Any = None) -> bool:
 def setup_logging(verbosity: int = 0) -> None:
     """Log to stderr: -1 warnings and errors only, 0 info, 1 or more debug."""
     level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
-    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s %(message)s",
-                        datefmt="%H:%M:%S")
+    logging.basicConfig(
+        level=level, stream=sys.stderr, format="%(asctime)s %(name)s %(levelname)s %(message)s", datefmt="%H:%M:%S"
+    )
 
 
 def add_verbosity(parser: argparse.ArgumentParser) -> None:
@@ -78,10 +80,12 @@ def add_verbosity(parser: argparse.ArgumentParser) -> None:
     (`sme bench -q loop`); `verbosity()` supplies the defaults."""
     if "-v" in parser._option_string_actions or "-q" in parser._option_string_actions:
         return
-    parser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
-                        help="more log output (repeat for more)")
-    parser.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
-                        help="only warnings and errors")
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=argparse.SUPPRESS, help="more log output (repeat for more)"
+    )
+    parser.add_argument(
+        "-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="only warnings and errors"
+    )
 
 
 def verbosity(args: argparse.Namespace) -> int:
@@ -111,12 +115,22 @@ def _num(x: float | None) -> float | None:
 
 
 def embedding_dict(e: Embedding, coordinates: bool = False) -> dict[str, Any]:
-    d = {"type": "embedding", "agent": e.agent_id, "world": e.world_id, "version": e.version,
-         "trigger": e.trigger, "n_points": int(e.coordinates.shape[0]),
-         "dims": int(e.coordinates.shape[1]) if e.coordinates.ndim == 2 else 1,
-         "eigenvalues": [round(v, 6) for v in e.eigenvalues], "procrustes_error": _num(e.procrustes_error),
-         "step": e.step, "timestamp": e.timestamp, "metrics": {k: _num(v) for k, v in e.metrics.items()},
-         "iteration": e.iteration, "drop_step": e.drop_step}
+    d = {
+        "type": "embedding",
+        "agent": e.agent_id,
+        "world": e.world_id,
+        "version": e.version,
+        "trigger": e.trigger,
+        "n_points": int(e.coordinates.shape[0]),
+        "dims": int(e.coordinates.shape[1]) if e.coordinates.ndim == 2 else 1,
+        "eigenvalues": [round(v, 6) for v in e.eigenvalues],
+        "procrustes_error": _num(e.procrustes_error),
+        "step": e.step,
+        "timestamp": e.timestamp,
+        "metrics": {k: _num(v) for k, v in e.metrics.items()},
+        "iteration": e.iteration,
+        "drop_step": e.drop_step,
+    }
     if coordinates:
         d["ids"] = list(e.ids)
         d["coordinates"] = e.coordinates.tolist()
@@ -124,12 +138,24 @@ def embedding_dict(e: Embedding, coordinates: bool = False) -> dict[str, Any]:
 
 
 def event_dict(e: AgentEvent) -> dict[str, Any]:
-    d = {"type": "event", "agent": e.agent_id, "world": e.world_id, "kind": e.kind, "reason": e.reason,
-         "detail": e.detail, "step": e.step, "timestamp": e.timestamp,
-         "values": {k: _num(v) for k, v in e.values.items()}}
+    d = {
+        "type": "event",
+        "agent": e.agent_id,
+        "world": e.world_id,
+        "kind": e.kind,
+        "reason": e.reason,
+        "detail": e.detail,
+        "step": e.step,
+        "timestamp": e.timestamp,
+        "values": {k: _num(v) for k, v in e.values.items()},
+    }
     if e.config is not None:
-        d["config"] = {"seed": e.config.seed, "detector": e.config.detector, "program": e.config.program,
-                       "program_params": dict(e.config.program_params)}
+        d["config"] = {
+            "seed": e.config.seed,
+            "detector": e.config.detector,
+            "program": e.config.program,
+            "program_params": dict(e.config.program_params),
+        }
     return d
 
 
@@ -141,19 +167,37 @@ def describe_trigger(e: Embedding) -> str:
 
 
 def status_dict(s: AgentStatus) -> dict[str, Any]:
-    return {"agent": s.agent_id, "uptime": round(s.uptime, 3), "counters": dict(s.counters),
-            "links": [{"world": ln.world_id, "kind": ln.kind, "program": ln.program, "state": ln.state,
-                       "steps": ln.steps, "episodes": ln.episodes, "embedding_version": ln.embedding_version,
-                       "reward_mean": round(ln.reward_mean, 6), "rejected": dict(ln.rejected),
-                       "last_procrustes_error": _num(ln.last_procrustes_error),
-                       "detector_statistic": _num(ln.detector_statistic), "drops": ln.drops} for ln in s.links]}
+    return {
+        "agent": s.agent_id,
+        "uptime": round(s.uptime, 3),
+        "counters": dict(s.counters),
+        "links": [
+            {
+                "world": ln.world_id,
+                "kind": ln.kind,
+                "program": ln.program,
+                "state": ln.state,
+                "steps": ln.steps,
+                "episodes": ln.episodes,
+                "embedding_version": ln.embedding_version,
+                "reward_mean": round(ln.reward_mean, 6),
+                "rejected": dict(ln.rejected),
+                "last_procrustes_error": _num(ln.last_procrustes_error),
+                "detector_statistic": _num(ln.detector_statistic),
+                "drops": ln.drops,
+            }
+            for ln in s.links
+        ],
+    }
 
 
 def format_embedding(e: Embedding) -> str:
     err = "n/a" if e.procrustes_error is None else f"{e.procrustes_error:.4f}"
     eig = " ".join(f"{v:.3g}" for v in e.eigenvalues[:4])
-    return (f"[{e.world_id}] embedding v{e.version:<3} {describe_trigger(e):<22} n={e.coordinates.shape[0]:<4} "
-            f"procrustes={err:<7} eig=[{eig}] step={e.step}")
+    return (
+        f"[{e.world_id}] embedding v{e.version:<3} {describe_trigger(e):<22} n={e.coordinates.shape[0]:<4} "
+        f"procrustes={err:<7} eig=[{eig}] step={e.step}"
+    )
 
 
 def format_event(e: AgentEvent) -> str:

@@ -20,17 +20,29 @@ from sensorimotor.worlds.registry import WORLDS, make_world
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="agent + a world in one command, with progress and a summary",
-                       description="Start the agent daemon (zenoh router on --listen, loopback) and a world "
-                       "node connected to it, show each embedding version as it arrives, and print a summary. "
-                       "Stops after --seconds, --steps or Ctrl-C.")
+    p = sub.add_parser(
+        "demo",
+        help="agent + a world in one command, with progress and a summary",
+        description="Start the agent daemon (zenoh router on --listen, loopback) and a world "
+        "node connected to it, show each embedding version as it arrives, and print a summary. "
+        "Stops after --seconds, --steps or Ctrl-C.",
+    )
     p.add_argument("--world", default="gridworld", help="world to run: " + ", ".join(sorted(WORLDS)))
-    p.add_argument("--param", action="append", metavar="K=V", help="world parameter, repeatable (e.g. barrier=true; see `sme world NAME --list-params`)")
+    p.add_argument(
+        "--param",
+        action="append",
+        metavar="K=V",
+        help="world parameter, repeatable (e.g. barrier=true; see `sme world NAME --list-params`)",
+    )
     p.add_argument("--seconds", type=float, default=15.0, help="run time in seconds (default 15)")
     p.add_argument("--steps", type=int, default=None, help="stop after this many world steps (and at most --seconds)")
     p.add_argument("--seed", type=int, default=0, help="seed of world and agent")
-    p.add_argument("--listen", default=keys.DEFAULT_ENDPOINT, metavar="ENDPOINT",
-                   help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT})")
+    p.add_argument(
+        "--listen",
+        default=keys.DEFAULT_ENDPOINT,
+        metavar="ENDPOINT",
+        help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT})",
+    )
     p.set_defaults(func=main_args, log_default=-1)  # quiet logs unless -v: the demo prints its own progress
 
 
@@ -97,8 +109,10 @@ def main_args(args: argparse.Namespace) -> int:
                 el = time.monotonic() - t0
                 if el >= next_tick:
                     next_tick += 5.0
-                    say(f"{el:6.1f}s [{wid}] {node.stats.steps} steps ({node.stats.steps / el:,.0f}/s), "
-                        f"{node.stats.episodes} episodes")
+                    say(
+                        f"{el:6.1f}s [{wid}] {node.stats.steps} steps ({node.stats.steps / el:,.0f}/s), "
+                        f"{node.stats.episodes} episodes"
+                    )
             node.stop()
             nthread.join(timeout=5)
         daemon.stop()
@@ -109,8 +123,10 @@ def main_args(args: argparse.Namespace) -> int:
         raise BrokenPipeError("stdout closed by its reader")  # cli.main turns it into a quiet exit
     el = time.monotonic() - t0
     print("\nsummary")
-    print(f"  world {wid} ({world.kind}): {node.stats.steps} lockstep steps in {el:.1f} s "
-          f"({node.stats.steps / max(el, 1e-9):,.0f} steps/s), {node.stats.episodes} episodes")
+    print(
+        f"  world {wid} ({world.kind}): {node.stats.steps} lockstep steps in {el:.1f} s "
+        f"({node.stats.steps / max(el, 1e-9):,.0f} steps/s), {node.stats.episodes} episodes"
+    )
     for ln in status.links:
         print(f"  link: {ln.embedding_version} embedding versions, rejected inputs {ln.rejected or 0}")
     emb = last.get("embedding")
@@ -118,8 +134,10 @@ def main_args(args: argparse.Namespace) -> int:
         print("  no embedding yet: run longer (--seconds)")
         return 1
     err = "n/a" if emb.procrustes_error is None else f"{emb.procrustes_error:.4f}"
-    print(f"  final embedding v{emb.version} ({emb.trigger}): {emb.coordinates.shape[0]} points in "
-          f"{emb.coordinates.shape[1]}-D, Procrustes error against truth {err}")
+    print(
+        f"  final embedding v{emb.version} ({emb.trigger}): {emb.coordinates.shape[0]} points in "
+        f"{emb.coordinates.shape[1]}-D, Procrustes error against truth {err}"
+    )
     if len(errors) > 1:
         print(f"  Procrustes error fell from {errors[0]:.4f} (v1) to {min(errors):.4f} (best) as the agent learned")
     return 0

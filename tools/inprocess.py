@@ -22,7 +22,7 @@ class InProcessRun:
     steps: int = 0
     episodes: int = 0
     seconds: float = 0.0
-    outputs: list[Any] = field(default_factory=list)   # Embedding and AgentEvent messages, in order
+    outputs: list[Any] = field(default_factory=list)  # Embedding and AgentEvent messages, in order
 
     @property
     def embeddings(self) -> list[Embedding]:
@@ -36,11 +36,16 @@ class InProcessRun:
         return [o for o in self.outputs if isinstance(o, AgentEvent) and (kind is None or o.kind == kind)]
 
 
-def run_inprocess(world: World, program: Program, steps: int, detector: DropDetector | None = None,
-                  on_output: Callable[[Any], None] | None = None,
-                  stop_when: Callable[[InProcessRun], bool] | None = None,
-                  perturb: Callable[[int], Control | None] | None = None,
-                  on_step: Callable[[int, Observation], None] | None = None) -> InProcessRun:
+def run_inprocess(
+    world: World,
+    program: Program,
+    steps: int,
+    detector: DropDetector | None = None,
+    on_output: Callable[[Any], None] | None = None,
+    stop_when: Callable[[InProcessRun], bool] | None = None,
+    perturb: Callable[[int], Control | None] | None = None,
+    on_step: Callable[[int, Observation], None] | None = None,
+) -> InProcessRun:
     """Run `program` on `world` for `steps` steps through the same attach path and lockstep driver
     as the daemon and the world node.
 
@@ -60,8 +65,9 @@ def run_inprocess(world: World, program: Program, steps: int, detector: DropDete
                 on_output(msg)
 
     lock = Lockstep(world, world.world_id)
-    link = attach(world.spec(), AgentConfig("inproc"), publish, truth=world.truth(), program=program,
-                  detector=detector).link
+    link = attach(
+        world.spec(), AgentConfig("inproc"), publish, truth=world.truth(), program=program, detector=detector
+    ).link
     t0 = time.perf_counter()
     for k in range(steps):
         obs = lock.observation()

@@ -29,9 +29,9 @@ COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none"
 
 @dataclass(frozen=True)
 class Record:
-    topic: str          # the zenoh key
-    schema: str         # protobuf full name, or "" for raw payloads
-    log_time: int       # ns since the epoch
+    topic: str  # the zenoh key
+    schema: str  # protobuf full name, or "" for raw payloads
+    log_time: int  # ns since the epoch
     data: bytes
     sequence: int = 0
 
@@ -85,7 +85,7 @@ class McapSink:
 def schema_of(encoding: str) -> str:
     """'application/protobuf;sme.v1.Observation' -> 'sme.v1.Observation'; anything else -> ''."""
     prefix = "application/protobuf;"
-    return encoding[len(prefix):] if encoding.startswith(prefix) else ""
+    return encoding[len(prefix) :] if encoding.startswith(prefix) else ""
 
 
 def read(path: str) -> Iterator[Record]:
@@ -101,8 +101,11 @@ def read(path: str) -> Iterator[Record]:
             except StopIteration:
                 return
             except Exception as e:  # EndOfFile at a cut, or a damaged record: either way, the end
-                log.warning("%s: stopped at a truncated or damaged record (%s): read what came before it",
-                            path, type(e).__name__)
+                log.warning(
+                    "%s: stopped at a truncated or damaged record (%s): read what came before it",
+                    path,
+                    type(e).__name__,
+                )
                 return
             if isinstance(rec, Schema):
                 schemas[rec.id] = rec.name

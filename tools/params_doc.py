@@ -56,8 +56,10 @@ def main(argv: list[str] | None = None) -> int:
     text = path.read_text()
     if args.check:
         same = current_section(text) == render_section()
-        print("README parameter tables are up to date" if same else "README parameter tables differ from the code",
-              file=sys.stderr)
+        print(
+            "README parameter tables are up to date" if same else "README parameter tables differ from the code",
+            file=sys.stderr,
+        )
         return 0 if same else 1
     path.write_text(rewrite(text))
     return 0

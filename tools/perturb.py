@@ -13,26 +13,33 @@ from sensorimotor.tools.common import parse_params
 
 KINDS = {
     "lesion": "retina: fields within --param radius=R px of (u, v) px read 0 (default a small off-centre part "
-              "of the fovea: u=6 v=0 radius=6)",
+    "of the fovea: u=6 v=0 radius=6)",
     "reverse": "retina: swap up/down motor commands (again to restore)",
     "noise": "retina: additive sensor noise, --param sd=0.05",
     "heal": "undo every perturbation",
     "morph": "mountain car/vergence: change the body, e.g. --baseline 1.4 or --vertical (same as --param "
-             "baseline=1.4, --param vertical=true)",
+    "baseline=1.4, --param vertical=true)",
 }
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("perturb", help="perturb a running world (lesion, reverse, noise, heal, morph)",
-                       description="Publish a Control message to a running world. Kinds: "
-                       + "; ".join(f"{k}: {v}" for k, v in KINDS.items())
-                       + ". The agent is not told: it has to notice the change from its own reward.")
+    p = sub.add_parser(
+        "perturb",
+        help="perturb a running world (lesion, reverse, noise, heal, morph)",
+        description="Publish a Control message to a running world. Kinds: "
+        + "; ".join(f"{k}: {v}" for k, v in KINDS.items())
+        + ". The agent is not told: it has to notice the change from its own reward.",
+    )
     p.add_argument("kind", help="perturbation kind: " + ", ".join(KINDS))
     p.add_argument("--world", required=True, help="id of the running world")
     p.add_argument("--param", action="append", metavar="K=V", help="perturbation parameter, repeatable")
     p.add_argument("--baseline", type=float, default=None, metavar="M", help="morph: camera baseline in metres")
-    p.add_argument("--vertical", action=argparse.BooleanOptionalAction, default=None,
-                   help="morph: cameras one above the other (--no-vertical: side by side)")
+    p.add_argument(
+        "--vertical",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="morph: cameras one above the other (--no-vertical: side by side)",
+    )
     add_bus_arguments(p, "tool")
     p.set_defaults(func=main_args)
 

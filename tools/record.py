@@ -27,8 +27,15 @@ class Recorder:
     appears, its spec and truth (served by queryables, not published) are fetched and written too,
     so a recording can be replayed into a fresh agent."""
 
-    def __init__(self, bus: Bus, path: str, key_expr: str = keys.ALL, compression: str = "zstd",
-                 chunk_size: int = 64 * 1024, flush_every: float = 0.2) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        path: str,
+        key_expr: str = keys.ALL,
+        compression: str = "zstd",
+        chunk_size: int = 64 * 1024,
+        flush_every: float = 0.2,
+    ) -> None:
         self.bus = bus
         self.path = path
         self.key_expr = key_expr
@@ -116,16 +123,20 @@ class Recorder:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("record", help="record a session to an MCAP file",
-                       description="Record every message on the bus (observations, actions, controls, truth, "
-                       "specs, embeddings, agent events, camera frames as foxglove.RawImage) into an MCAP file "
-                       "with its protobuf schemas embedded, so standard tools (mcap CLI, Foxglove, `rerun mcap "
-                       "convert`) read it. Chunks are flushed every 0.2 s: a recorder killed with SIGKILL "
-                       "leaves a file `sme replay` reads up to its last complete chunk, and `sme recover` turns "
-                       "into a complete one. Stop with Ctrl-C or --seconds.")
+    p = sub.add_parser(
+        "record",
+        help="record a session to an MCAP file",
+        description="Record every message on the bus (observations, actions, controls, truth, "
+        "specs, embeddings, agent events, camera frames as foxglove.RawImage) into an MCAP file "
+        "with its protobuf schemas embedded, so standard tools (mcap CLI, Foxglove, `rerun mcap "
+        "convert`) read it. Chunks are flushed every 0.2 s: a recorder killed with SIGKILL "
+        "leaves a file `sme replay` reads up to its last complete chunk, and `sme recover` turns "
+        "into a complete one. Stop with Ctrl-C or --seconds.",
+    )
     p.add_argument("file", help="output .mcap file")
-    p.add_argument("--keys", default=keys.ALL, metavar="EXPR",
-                   help=f"zenoh key expression to record (default {keys.ALL})")
+    p.add_argument(
+        "--keys", default=keys.ALL, metavar="EXPR", help=f"zenoh key expression to record (default {keys.ALL})"
+    )
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--compression", choices=sorted(COMPRESSIONS), default="zstd", help="chunk compression")
     p.add_argument("--chunk-kb", type=int, default=64, help="chunk size in KB (smaller loses less on a kill)")
@@ -153,11 +164,17 @@ def main_args(args: argparse.Namespace) -> int:
                 break
             if el >= next_tick:
                 next_tick += 5.0
-                print(f"  {el:5.0f} s  {rec.written} messages written ({rec.received / el:,.0f}/s)", file=sys.stderr,
-                      flush=True)
+                print(
+                    f"  {el:5.0f} s  {rec.written} messages written ({rec.received / el:,.0f}/s)",
+                    file=sys.stderr,
+                    flush=True,
+                )
             stop.wait(0.1)
         rec.stop()
     el = time.monotonic() - t0
-    print(f"sme record: {rec.written} messages in {el:.1f} s ({rec.written / max(el, 1e-9):,.0f}/s), "
-          f"{len(rec.by_key)} channels, received {rec.received}, max backlog {rec.max_backlog}", file=sys.stderr)
+    print(
+        f"sme record: {rec.written} messages in {el:.1f} s ({rec.written / max(el, 1e-9):,.0f}/s), "
+        f"{len(rec.by_key)} channels, received {rec.received}, max backlog {rec.max_backlog}",
+        file=sys.stderr,
+    )
     return 0

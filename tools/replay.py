@@ -65,6 +65,7 @@ def classify(topic: str) -> tuple[str, str, str]:
 
 # --- offline ------------------------------------------------------------------------------------
 
+
 @dataclass
 class OfflineResult:
     embeddings: list[Embedding] = field(default_factory=list)
@@ -102,8 +103,13 @@ def recorded_config(records: Iterable[Record]) -> dict[str, AttachConfig]:
     return out
 
 
-def replay_offline(path: str, seed: int | None = None, detector: str | None = None,
-                   program_params: dict[str, dict[str, Any]] | None = None, agent_id: str = "offline") -> OfflineResult:
+def replay_offline(
+    path: str,
+    seed: int | None = None,
+    detector: str | None = None,
+    program_params: dict[str, dict[str, Any]] | None = None,
+    agent_id: str = "offline",
+) -> OfflineResult:
     """Re-learn a recording without the bus, through the daemon's attach path. Settings not given
     are taken from the recording's `attached` events (what the live agent ran with), else the
     daemon's defaults."""
@@ -126,9 +132,12 @@ def replay_offline(path: str, seed: int | None = None, detector: str | None = No
                 log.warning("bad recorded spec for %s: %s", wid, e)
                 continue
             config = AgentConfig.from_attach(agent_id, cfg.get(wid, AttachConfig()))
-            config = replace(config, seed=config.seed if seed is None else seed,
-                             detector=detector or config.detector,
-                             program_params=config.program_params if program_params is None else program_params)
+            config = replace(
+                config,
+                seed=config.seed if seed is None else seed,
+                detector=detector or config.detector,
+                program_params=config.program_params if program_params is None else program_params,
+            )
             res.links[wid] = attach(spec, config, publisher, truth=link.truth if link else None, previous=link).link
         elif kind == "truth" and link is not None:
             try:
@@ -149,6 +158,7 @@ def replay_offline(path: str, seed: int | None = None, detector: str | None = No
 
 
 # --- online -------------------------------------------------------------------------------------
+
 
 def _remap(rec: Record, kind: str, wid: str, remap: dict[str, str], session: str) -> Record:
     new = remap.get(wid, wid)
@@ -172,9 +182,18 @@ def _remap(rec: Record, kind: str, wid: str, remap: dict[str, str], session: str
 class Replayer:
     WORLD_KINDS = ("obs", "truth", "image")
 
-    def __init__(self, bus: Bus, path: str, speed: float = 1.0, start: float = 0.0, end: float | None = None,
-                 remap: dict[str, str] | None = None, what: str = "world", handshake: float = 10.0,
-                 answer_timeout: float = 5.0) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        path: str,
+        speed: float = 1.0,
+        start: float = 0.0,
+        end: float | None = None,
+        remap: dict[str, str] | None = None,
+        what: str = "world",
+        handshake: float = 10.0,
+        answer_timeout: float = 5.0,
+    ) -> None:
         if speed <= 0:
             raise ValueError("--speed must be > 0")
         if what not in ("world", "all"):
@@ -211,13 +230,15 @@ class Replayer:
         if want is None:
             return
         with self._cond:
-            ok = self._cond.wait_for(lambda: self._last_answer.get(wid, -1) >= want or self.stop_event.is_set(),
-                                     self.answer_timeout)
+            ok = self._cond.wait_for(
+                lambda: self._last_answer.get(wid, -1) >= want or self.stop_event.is_set(), self.answer_timeout
+            )
         if not ok:
             self.unanswered += 1
             if self.unanswered == 1:
-                log.warning("world %s: no answer to step %d within %.1f s; going on without it", wid, want,
-                            self.answer_timeout)
+                log.warning(
+                    "world %s: no answer to step %d within %.1f s; going on without it", wid, want, self.answer_timeout
+                )
 
     def _declare_world(self, wid: str) -> None:
         self._answered[wid] = threading.Event()
@@ -289,7 +310,9 @@ class Replayer:
             if t0_wall is None and kind == "obs" and self.what == "world" and new in self._answered:
                 # hold the first observation until an agent answers it
                 deadline = time.monotonic() + self.handshake
-                while not self._answered[new].wait(0.5) and time.monotonic() < deadline and not self.stop_event.is_set():
+                while (
+                    not self._answered[new].wait(0.5) and time.monotonic() < deadline and not self.stop_event.is_set()
+                ):
                     pub.put(rec.data)
                 t0_wall, t0_rec = time.monotonic(), rec.log_time
             elif t0_wall is None:
@@ -301,28 +324,48 @@ class Replayer:
 
 # --- CLI ----------------------------------------------------------------------------------------
 
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("replay", help="replay a recording onto the bus, or re-learn it offline", description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "replay",
+        help="replay a recording onto the bus, or re-learn it offline",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("file", help="a recording made by `sme record` (a truncated one is read up to its last chunk)")
     p.add_argument("--speed", type=float, default=1.0, help="time scale: 10 replays ten times faster (default 1)")
     p.add_argument("--loop", action="store_true", help="replay again and again (each loop is a new world session)")
     p.add_argument("--start", type=float, default=0.0, metavar="S", help="skip the first S seconds of the recording")
     p.add_argument("--end", type=float, default=None, metavar="S", help="stop S seconds into the recording")
     p.add_argument("--remap", action="append", metavar="OLD=NEW", help="replay world OLD as world NEW, repeatable")
-    p.add_argument("--what", choices=["world", "all"], default="world",
-                   help="world: the worlds' side only, for a fresh agent to learn from (default); all: every "
-                   "recorded message (embeddings and events too), for `sme watch`/`sme view`")
-    p.add_argument("--answer-timeout", type=float, default=5.0, metavar="S",
-                   help="--what world: wait at most S seconds for the agent's answer to an observation before "
-                   "publishing the next one (default 5); the replay never outruns the agent")
-    p.add_argument("--offline", action="store_true",
-                   help="no bus: feed the recording through the agent's programs and print the embeddings")
+    p.add_argument(
+        "--what",
+        choices=["world", "all"],
+        default="world",
+        help="world: the worlds' side only, for a fresh agent to learn from (default); all: every "
+        "recorded message (embeddings and events too), for `sme watch`/`sme view`",
+    )
+    p.add_argument(
+        "--answer-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="--what world: wait at most S seconds for the agent's answer to an observation before "
+        "publishing the next one (default 5); the replay never outruns the agent",
+    )
+    p.add_argument(
+        "--offline",
+        action="store_true",
+        help="no bus: feed the recording through the agent's programs and print the embeddings",
+    )
     p.add_argument("--json", action="store_true", help="--offline: one JSON object per embedding")
-    p.add_argument("--out", default=None, metavar="FILE", help="--offline: write embeddings (JSON lines, with "
-                   "coordinates) to FILE")
+    p.add_argument(
+        "--out", default=None, metavar="FILE", help="--offline: write embeddings (JSON lines, with coordinates) to FILE"
+    )
     p.add_argument("--seed", type=int, default=None, help="--offline: program seed (default: as recorded)")
-    p.add_argument("--detector", choices=sorted(DETECTORS), default=None, help="--offline: detector (default: as recorded)")
+    p.add_argument(
+        "--detector", choices=sorted(DETECTORS), default=None, help="--offline: detector (default: as recorded)"
+    )
     add_bus_arguments(p, "world")
     p.set_defaults(func=main_args)
 
@@ -347,8 +390,11 @@ def main_args(args: argparse.Namespace) -> int:
         if out:
             out.close()
         same, n = res.compare()
-        print(f"sme replay --offline: {len(res.embeddings)} embeddings; {same} of {n} identical (same bytes) to "
-              f"those published live during the recording", file=sys.stderr)
+        print(
+            f"sme replay --offline: {len(res.embeddings)} embeddings; {same} of {n} identical (same bytes) to "
+            f"those published live during the recording",
+            file=sys.stderr,
+        )
         return 0 if same == n else 1
     remap = {}
     for item in args.remap or []:
@@ -365,8 +411,9 @@ def main_args(args: argparse.Namespace) -> int:
         print(f"sme replay: {e}", file=sys.stderr)
         return 2
     with bus:
-        rp = Replayer(bus, args.file, args.speed, args.start, args.end, remap, args.what,
-                      answer_timeout=args.answer_timeout)
+        rp = Replayer(
+            bus, args.file, args.speed, args.start, args.end, remap, args.what, answer_timeout=args.answer_timeout
+        )
         signal.signal(signal.SIGINT, lambda *a: rp.stop_event.set())
         signal.signal(signal.SIGTERM, lambda *a: rp.stop_event.set())
         t0 = time.monotonic()
@@ -378,8 +425,10 @@ def main_args(args: argparse.Namespace) -> int:
                 break
         time.sleep(0.5)  # let the last puts leave
     late = f"; {rp.unanswered} observations not answered in time" if rp.unanswered else ""
-    print(f"sme replay: {rp.published} messages in {time.monotonic() - t0:.1f} s ({i} pass{'es' if i > 1 else ''})"
-          f"{late}", file=sys.stderr)
+    print(
+        f"sme replay: {rp.published} messages in {time.monotonic() - t0:.1f} s ({i} pass{'es' if i > 1 else ''}){late}",
+        file=sys.stderr,
+    )
     return 0
 
 
@@ -392,11 +441,12 @@ def recover_main(args: argparse.Namespace) -> int:
 
 
 def add_recover_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("recover", help="rewrite a truncated recording into a complete MCAP file",
-                       description="Read a recording up to its last complete chunk (e.g. after the recorder was "
-                       "killed) and write a complete MCAP file (summary and index) that every tool opens.")
+    p = sub.add_parser(
+        "recover",
+        help="rewrite a truncated recording into a complete MCAP file",
+        description="Read a recording up to its last complete chunk (e.g. after the recorder was "
+        "killed) and write a complete MCAP file (summary and index) that every tool opens.",
+    )
     p.add_argument("src", help="the damaged or truncated .mcap")
     p.add_argument("dst", help="the new .mcap")
     p.set_defaults(func=recover_main)
-
-

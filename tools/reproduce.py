@@ -37,6 +37,7 @@ def _fmt(ms: tuple[float, float], digits: int = 2) -> str:
 
 # --- jobs (top-level functions: picklable for worker processes) ----------------------------------
 
+
 def job_grid(seed: int, barrier: bool, steps: int, policy: str = "lspi") -> dict:
     from sensorimotor.agent.programs.gridworld import GridworldProgram
     from sensorimotor.tools.inprocess import run_inprocess
@@ -52,30 +53,63 @@ def job_learning(seed: int, steps: int, every: int, supersample: int) -> dict:
     from sensorimotor.tools.experiments import retina as R
 
     c = R.learning(seed, steps=steps, every=every, supersample=supersample)
-    return {"seed": seed, "steps": c.steps, "one": c.one, "two": c.two, "activation": c.activation,
-            "geometry": c.geometry}
+    return {
+        "seed": seed,
+        "steps": c.steps,
+        "one": c.one,
+        "two": c.two,
+        "activation": c.activation,
+        "geometry": c.geometry,
+    }
 
 
 def job_lesion(seed: int, rule: str, at: int, steps: int, every: int, supersample: int) -> dict:
     from sensorimotor.tools.experiments import retina as R
 
-    r = R.perturbation(seed, "lesion", at=at, steps=steps, rule=rule, detector=None, supersample=supersample,
-                       exploration="gaussian", every=every, embed_every=10**9)
-    return {"seed": seed, "rule": rule, "steps": r.curve.steps, "activation": r.curve.activation,
-            "train_reward": R.moving_average(r.rewards, 200)[::every].tolist()}
+    r = R.perturbation(
+        seed,
+        "lesion",
+        at=at,
+        steps=steps,
+        rule=rule,
+        detector=None,
+        supersample=supersample,
+        exploration="gaussian",
+        every=every,
+        embed_every=10**9,
+    )
+    return {
+        "seed": seed,
+        "rule": rule,
+        "steps": r.curve.steps,
+        "activation": r.curve.activation,
+        "train_reward": R.moving_average(r.rewards, 200)[::every].tolist(),
+    }
 
 
 def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
     from sensorimotor.tools.experiments import retina as R
 
     r = R.perturbation(seed, "reverse", at=at, steps=steps, supersample=supersample)
-    embs = [{"version": e.version, "trigger": e.trigger, "procrustes_error": e.procrustes_error,
-             "step": e.step, "n_points": int(e.coordinates.shape[0])} for e in r.run.embeddings]
+    embs = [
+        {
+            "version": e.version,
+            "trigger": e.trigger,
+            "procrustes_error": e.procrustes_error,
+            "step": e.step,
+            "n_points": int(e.coordinates.shape[0]),
+        }
+        for e in r.run.embeddings
+    ]
     after = [d for d in r.drop_episodes if d >= at]
-    return {"seed": seed, "detection_delay": (after[0] - at) if after else None,
-            "false_alarms": sum(d < at for d in r.drop_episodes),
-            "relearn_episodes": R.relearn_episodes(r.rewards, at), "embeddings": embs,
-            "reward_ma": R.moving_average(r.rewards, 200)[::50].tolist()}
+    return {
+        "seed": seed,
+        "detection_delay": (after[0] - at) if after else None,
+        "false_alarms": sum(d < at for d in r.drop_episodes),
+        "relearn_episodes": R.relearn_episodes(r.rewards, at),
+        "embeddings": embs,
+        "reward_ma": R.moving_average(r.rewards, 200)[::50].tolist(),
+    }
 
 
 def job_vergence(seed: int, world: str, iterations: int) -> dict:
@@ -96,10 +130,16 @@ def job_vergence(seed: int, world: str, iterations: int) -> dict:
     w.close()
     embs = run.embeddings
     first_perfect = next((i + 1 for i, e in enumerate(embs) if e.metrics["policy_success"] == 1.0), None)
-    return {"seed": seed, "world": world, "errors": [e.procrustes_error for e in embs],
-            "success": [e.metrics["policy_success"] for e in embs], "first_perfect_iteration": first_perfect,
-            "goal_minus_truth": (np.array(goals) - truth).tolist() if world == "stereo" else
-            (np.array(goals) - truth / 0.01).tolist()}
+    return {
+        "seed": seed,
+        "world": world,
+        "errors": [e.procrustes_error for e in embs],
+        "success": [e.metrics["policy_success"] for e in embs],
+        "first_perfect_iteration": first_perfect,
+        "goal_minus_truth": (np.array(goals) - truth).tolist()
+        if world == "stereo"
+        else (np.array(goals) - truth / 0.01).tolist(),
+    }
 
 
 def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, morph_at: int | None = None) -> dict:
@@ -110,13 +150,29 @@ def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, m
     elif kind == "random":
         return {"kind": kind, "seed": seed, "curve": [(0, M.random_agent(seed, n_eval))]}
     elif kind == "live":
-        r = M.visual(seed, train, every, n_eval, morph_at=morph_at, morph={"baseline": "1.4"}, detector="cusum",
-                     watch_after=morph_at // 2)
+        r = M.visual(
+            seed,
+            train,
+            every,
+            n_eval,
+            morph_at=morph_at,
+            morph={"baseline": "1.4"},
+            detector="cusum",
+            watch_after=morph_at // 2,
+        )
     else:
         body = {"baseline-1.0": {}, "baseline-1.4": {"baseline": 1.4}, "vertical": {"vertical": True}}[kind]
         r = M.visual(seed, train, every, n_eval, **body)
-    return {"kind": kind, "seed": seed, "curve": r.curve, "embeddings": r.embeddings, "drops": r.drops,
-            "morph_at": r.morph_at, "world_steps": r.world_steps, "seconds": r.seconds}
+    return {
+        "kind": kind,
+        "seed": seed,
+        "curve": r.curve,
+        "embeddings": r.embeddings,
+        "drops": r.drops,
+        "morph_at": r.morph_at,
+        "world_steps": r.world_steps,
+        "seconds": r.seconds,
+    }
 
 
 def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
@@ -128,23 +184,42 @@ def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
 
 # --- chapters ------------------------------------------------------------------------------------
 
+
 def gridworld(runs: int, quick: bool, workers: int, out: str) -> dict:
     steps = 8000 if quick else 20000
-    jobs = [(s, b, steps) for b in (False, True) for s in range(runs)] + [(s, False, 10000, "random") for s in range(runs)]
+    jobs = [(s, b, steps) for b in (False, True) for s in range(runs)] + [
+        (s, False, 10000, "random") for s in range(runs)
+    ]
     res = _pool_map(job_grid, jobs, workers)
     table = []
-    for name, sel in (("plain", lambda r: not r["barrier"] and r["policy"] == "lspi"),
-                      ("barrier", lambda r: r["barrier"]), ("random policy", lambda r: r["policy"] == "random")):
+    for name, sel in (
+        ("plain", lambda r: not r["barrier"] and r["policy"] == "lspi"),
+        ("barrier", lambda r: r["barrier"]),
+        ("random policy", lambda r: r["policy"] == "random"),
+    ):
         rs = [r for r in res if sel(r)]
         final = [r["errors"][-1] for r in rs]
         first = [r["errors"][0] for r in rs]
         table.append({"case": name, "first": _mean_se(first), "final": _mean_se(final), "runs": len(rs)})
     lines = ["| case | Procrustes error, first embedding | final | runs |", "|---|---|---|---|"]
     lines += [f"| {t['case']} | {_fmt(t['first'], 4)} | {_fmt(t['final'], 4)} | {t['runs']} |" for t in table]
-    _plot(out, "gridworld_lspi.png", "Procrustes error per LSPI iteration (Fig 5.4)", "LSPI iteration",
-          "Procrustes error", [(f"{'barrier' if r['barrier'] else 'plain'} seed {r['seed']}",
-                                list(range(1, len(r["errors"]) + 1)), r["errors"]) for r in res if r["policy"] == "lspi"],
-          logy=True)
+    _plot(
+        out,
+        "gridworld_lspi.png",
+        "Procrustes error per LSPI iteration (Fig 5.4)",
+        "LSPI iteration",
+        "Procrustes error",
+        [
+            (
+                f"{'barrier' if r['barrier'] else 'plain'} seed {r['seed']}",
+                list(range(1, len(r["errors"]) + 1)),
+                r["errors"],
+            )
+            for r in res
+            if r["policy"] == "lspi"
+        ],
+        logy=True,
+    )
     return {"results": res, "table": table, "markdown": "\n".join(lines)}
 
 
@@ -153,23 +228,43 @@ def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2)
     les = dict(at=1000, steps=2500, every=250) if quick else dict(at=2000, steps=6000, every=250)
     rev = dict(at=2000, steps=4500) if quick else dict(at=4000, steps=8000)
     learning = _pool_map(job_learning, [(s, L["steps"], L["every"], supersample) for s in range(runs)], workers)
-    lesion = _pool_map(job_lesion, [(s, rule, les["at"], les["steps"], les["every"], supersample)
-                                    for rule in ("basic", "robust") for s in range(runs)], workers)
+    lesion = _pool_map(
+        job_lesion,
+        [
+            (s, rule, les["at"], les["steps"], les["every"], supersample)
+            for rule in ("basic", "robust")
+            for s in range(runs)
+        ],
+        workers,
+    )
     reversal = _pool_map(job_reversal, [(s, rev["at"], rev["steps"], supersample) for s in range(runs)], workers)
 
     one = _mean_se([r["one"][-1] for r in learning])
     two = _mean_se([r["two"][-1] for r in learning])
     geo0 = _mean_se([r["geometry"][0] for r in learning])
     geo = _mean_se([r["geometry"][-1] for r in learning])
-    end = {rule: _mean_se([np.mean(r["activation"][-4:]) for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")}
-    post = {rule: _mean_se([np.mean([a for s, a in zip(r["steps"], r["activation"], strict=True) if s > les["at"]])
-                            for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")}
+    end = {
+        rule: _mean_se([np.mean(r["activation"][-4:]) for r in lesion if r["rule"] == rule])
+        for rule in ("basic", "robust")
+    }
+    post = {
+        rule: _mean_se(
+            [
+                np.mean([a for s, a in zip(r["steps"], r["activation"], strict=True) if s > les["at"]])
+                for r in lesion
+                if r["rule"] == rule
+            ]
+        )
+        for rule in ("basic", "robust")
+    }
     delays = [r["detection_delay"] for r in reversal]
     relearn = [r["relearn_episodes"] for r in reversal]
     relearned = [any(e["trigger"] == Trigger.RELEARNED for e in r["embeddings"]) for r in reversal]
     lines = [
-        f"Retina (ch. 4): {runs} seeded runs; mean ± standard error.", "",
-        "| measure | ours | dissertation |", "|---|---|---|",
+        f"Retina (ch. 4): {runs} seeded runs; mean ± standard error.",
+        "",
+        "| measure | ours | dissertation |",
+        "|---|---|---|",
         f"| 1-saccade error after {L['steps']} steps (px) | {_fmt(one)} | about 5 |",
         f"| 2-saccade error after {L['steps']} steps (px) | {_fmt(two)} | lower than 1 saccade |",
         f"| E_geometry (px), start → after {L['steps']} steps | {_fmt(geo0)} → {_fmt(geo)} | falls with training |",
@@ -181,25 +276,60 @@ def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2)
         f"| reversal: a 'relearned' embedding was published, per run | {relearned} | |",
     ]
     xs = learning[0]["steps"]
-    _plot(out, "retina_learning.png", "Saccade error while learning (Fig 4.3)", "training saccades", "px",
-          [("1 saccade", xs, np.mean([r["one"] for r in learning], axis=0)),
-           ("2 saccades", xs, np.mean([r["two"] for r in learning], axis=0)),
-           ("E_geometry", xs, np.mean([r["geometry"] for r in learning], axis=0))])
-    _plot(out, "retina_lesion.png", f"Greedy post-saccade activation, lesion at {les['at']} (Fig 4.4)",
-          "training saccades", "activation",
-          [(rule, lesion[0]["steps"], np.mean([r["activation"] for r in lesion if r["rule"] == rule], axis=0))
-           for rule in ("basic", "robust")], vline=les["at"])
-    _plot(out, "retina_reversal.png", f"Reward (moving average), reversal at {rev['at']} (Fig 4.5)",
-          "training saccades", "post-saccade reward",
-          [(f"seed {r['seed']}", list(range(0, 50 * len(r["reward_ma"]), 50)), r["reward_ma"]) for r in reversal],
-          vline=rev["at"])
-    return {"learning": learning, "lesion": lesion, "reversal": reversal, "markdown": "\n".join(lines),
-            "summary": {"one": one, "two": two, "geometry_start": geo0, "geometry_end": geo, "lesion_end": end,
-                        "lesion_post_mean": post, "detection_delays": delays, "relearn_episodes": relearn}}
+    _plot(
+        out,
+        "retina_learning.png",
+        "Saccade error while learning (Fig 4.3)",
+        "training saccades",
+        "px",
+        [
+            ("1 saccade", xs, np.mean([r["one"] for r in learning], axis=0)),
+            ("2 saccades", xs, np.mean([r["two"] for r in learning], axis=0)),
+            ("E_geometry", xs, np.mean([r["geometry"] for r in learning], axis=0)),
+        ],
+    )
+    _plot(
+        out,
+        "retina_lesion.png",
+        f"Greedy post-saccade activation, lesion at {les['at']} (Fig 4.4)",
+        "training saccades",
+        "activation",
+        [
+            (rule, lesion[0]["steps"], np.mean([r["activation"] for r in lesion if r["rule"] == rule], axis=0))
+            for rule in ("basic", "robust")
+        ],
+        vline=les["at"],
+    )
+    _plot(
+        out,
+        "retina_reversal.png",
+        f"Reward (moving average), reversal at {rev['at']} (Fig 4.5)",
+        "training saccades",
+        "post-saccade reward",
+        [(f"seed {r['seed']}", list(range(0, 50 * len(r["reward_ma"]), 50)), r["reward_ma"]) for r in reversal],
+        vline=rev["at"],
+    )
+    return {
+        "learning": learning,
+        "lesion": lesion,
+        "reversal": reversal,
+        "markdown": "\n".join(lines),
+        "summary": {
+            "one": one,
+            "two": two,
+            "geometry_start": geo0,
+            "geometry_end": geo,
+            "lesion_end": end,
+            "lesion_post_mean": post,
+            "detection_delays": delays,
+            "relearn_episodes": relearn,
+        },
+    }
 
 
-def _plot(out: str, name: str, title: str, xlabel: str, ylabel: str, series, logy: bool = False,
-          vline: float | None = None) -> None:
+def _plot(
+    out: str, name: str, title: str, xlabel: str, ylabel: str, series, logy: bool = False, vline: float | None = None
+) -> None:
     matplotlib = require("matplotlib")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -222,18 +352,32 @@ def _plot(out: str, name: str, title: str, xlabel: str, ylabel: str, series, log
 def vergence(runs: int, quick: bool, workers: int, out: str) -> dict:
     iters = 5 if quick else 12
     res = _pool_map(job_vergence, [(s, w, iters) for w in ("vergence", "stereo") for s in range(runs)], workers)
-    lines = ["| world | first perfect LSPI iteration (per run) | Procrustes error of the last embedding | "
-             "matching minimum vs truth | dissertation |", "|---|---|---|---|---|"]
-    for w, ref in (("vergence", "perfect in 9 iterations; Procrustes 0.0257"),
-                   ("stereo", "within 2 px; Procrustes 0.0003")):
+    lines = [
+        "| world | first perfect LSPI iteration (per run) | Procrustes error of the last embedding | "
+        "matching minimum vs truth | dissertation |",
+        "|---|---|---|---|---|",
+    ]
+    for w, ref in (
+        ("vergence", "perfect in 9 iterations; Procrustes 0.0257"),
+        ("stereo", "within 2 px; Procrustes 0.0003"),
+    ):
         rs = [r for r in res if r["world"] == w]
         diff = np.abs(np.array(rs[0]["goal_minus_truth"]))
         unit = "px" if w == "stereo" else "steps of 0.01 rad"
         match = f"{(diff <= 2).mean() * 100:.0f} % within 2 {unit}, max {diff.max():.1f}"
-        lines.append(f"| {w} | {[r['first_perfect_iteration'] for r in rs]} | {_fmt(_mean_se([r['errors'][-1] for r in rs]), 4)} "
-                     f"| {match} | {ref} |")
-    _plot(out, "vergence_lspi.png", "Procrustes error per LSPI iteration (ch. 7)", "LSPI iteration", "Procrustes error",
-          [(f"{r['world']} seed {r['seed']}", list(range(1, len(r["errors"]) + 1)), r["errors"]) for r in res], logy=True)
+        lines.append(
+            f"| {w} | {[r['first_perfect_iteration'] for r in rs]} | {_fmt(_mean_se([r['errors'][-1] for r in rs]), 4)} "
+            f"| {match} | {ref} |"
+        )
+    _plot(
+        out,
+        "vergence_lspi.png",
+        "Procrustes error per LSPI iteration (ch. 7)",
+        "LSPI iteration",
+        "Procrustes error",
+        [(f"{r['world']} seed {r['seed']}", list(range(1, len(r["errors"]) + 1)), r["errors"]) for r in res],
+        logy=True,
+    )
     return {"results": res, "markdown": "\n".join(lines)}
 
 
@@ -262,49 +406,97 @@ def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
     ci = {k: _ci95(v) for k, v in finals.items()}
     from scipy import stats
 
-    lines = [f"Visual mountain car (ch. 8): {runs} seeded runs per body; {train} training car steps, evaluated every "
-             f"{every} on {n_eval} fixed random states (mean steps to goal, lower is better; 1000 = never).", "",
-             "| agent | steps to goal at the end (mean ± 95 % CI) | vs true state | dissertation |", "|---|---|---|---|"]
+    lines = [
+        f"Visual mountain car (ch. 8): {runs} seeded runs per body; {train} training car steps, evaluated every "
+        f"{every} on {n_eval} fixed random states (mean steps to goal, lower is better; 1000 = never).",
+        "",
+        "| agent | steps to goal at the end (mean ± 95 % CI) | vs true state | dissertation |",
+        "|---|---|---|---|",
+    ]
     t = ci["true"][0]
-    for k, label in (("baseline-1.0", "sensorimotor features, baseline 1.0 m"), ("baseline-1.4", "same program, baseline 1.4 m"),
-                     ("vertical", "same program, vertical cameras"), ("true", "true position and velocity"),
-                     ("random", "random agent")):
+    for k, label in (
+        ("baseline-1.0", "sensorimotor features, baseline 1.0 m"),
+        ("baseline-1.4", "same program, baseline 1.4 m"),
+        ("vertical", "same program, vertical cameras"),
+        ("true", "true position and velocity"),
+        ("random", "random agent"),
+    ):
         ref = {"true": "ideal", "random": "benchmark"}.get(k, "comparable to true state")
         lines.append(f"| {label} | {_fmt(ci[k], 1)} | {ci[k][0] / t:.2f}x | {ref} |")
     pairs = [("baseline-1.0", "baseline-1.4"), ("baseline-1.0", "vertical"), ("baseline-1.4", "vertical")]
-    tests = {f"{a} vs {b}": float(stats.ttest_ind(finals[a], finals[b], equal_var=False).pvalue)
-             if len(finals[a]) > 1 and len(finals[b]) > 1 else float("nan") for a, b in pairs}
-    lines += ["", "Bodies compared (Welch t-test p, no significant difference when > 0.05): " +
-              ", ".join(f"{k}: p = {p:.2f}" for k, p in tests.items())]
+    tests = {
+        f"{a} vs {b}": float(stats.ttest_ind(finals[a], finals[b], equal_var=False).pvalue)
+        if len(finals[a]) > 1 and len(finals[b]) > 1
+        else float("nan")
+        for a, b in pairs
+    }
+    lines += [
+        "",
+        "Bodies compared (Welch t-test p, no significant difference when > 0.05): "
+        + ", ".join(f"{k}: p = {p:.2f}" for k, p in tests.items()),
+    ]
     live = []
     for r in (r for r in res if r["kind"] == "live"):
         pre = [m for s, m in r["curve"] if s <= r["morph_at"]][-2:]
         before = float(np.mean(pre)) if pre else float("nan")
         drops = [d for d in r["drops"] if d >= r["morph_at"]]
         relearned = [e for e in r["embeddings"] if e["trigger"] == Trigger.RELEARNED]
-        back = next((s for s, m in r["curve"] if s > r["morph_at"] and relearned and s >= relearned[0]["training_steps"]
-                     and m <= 1.2 * before), None)
-        live.append({"seed": r["seed"], "before": before, "detected_after": (drops[0] - r["morph_at"]) if drops else None,
-                     "relearned_embedding": bool(relearned), "recovered_after": (back - r["morph_at"]) if back else None,
-                     "after": [m for s, m in r["curve"] if s > r["morph_at"]]})
+        back = next(
+            (
+                s
+                for s, m in r["curve"]
+                if s > r["morph_at"] and relearned and s >= relearned[0]["training_steps"] and m <= 1.2 * before
+            ),
+            None,
+        )
+        live.append(
+            {
+                "seed": r["seed"],
+                "before": before,
+                "detected_after": (drops[0] - r["morph_at"]) if drops else None,
+                "relearned_embedding": bool(relearned),
+                "recovered_after": (back - r["morph_at"]) if back else None,
+                "after": [m for s, m in r["curve"] if s > r["morph_at"]],
+            }
+        )
     lines += ["", f"Live body change, baseline 1.0 → 1.4 m after {morph_at} training steps (per run): "]
     for lv in live:
-        lines.append(f"- seed {lv['seed']}: before {lv['before']:.1f} steps to goal; drop detected "
-                     f"{lv['detected_after']} training steps after the change; new embedding: {lv['relearned_embedding']}; "
-                     f"back within 20 % after {lv['recovered_after']} training steps; evaluations after: "
-                     f"{[round(m, 1) for m in lv['after']]}")
+        lines.append(
+            f"- seed {lv['seed']}: before {lv['before']:.1f} steps to goal; drop detected "
+            f"{lv['detected_after']} training steps after the change; new embedding: {lv['relearned_embedding']}; "
+            f"back within 20 % after {lv['recovered_after']} training steps; evaluations after: "
+            f"{[round(m, 1) for m in lv['after']]}"
+        )
     series = []
     for k in kinds:
         rs = [r for r in res if r["kind"] == k]
         xs = [s for s, _ in rs[0]["curve"]]
         series.append((k, xs, np.mean([[m for _, m in r["curve"]][: len(xs)] for r in rs], axis=0)))
     series.append(("random", [series[0][1][0], series[0][1][-1]], [ci["random"][0]] * 2))
-    _plot(out, "mountaincar_learning.png", "Mean steps to goal (Fig 8.2, 8.4)", "training car steps", "steps to goal",
-          series, logy=True)
+    _plot(
+        out,
+        "mountaincar_learning.png",
+        "Mean steps to goal (Fig 8.2, 8.4)",
+        "training car steps",
+        "steps to goal",
+        series,
+        logy=True,
+    )
     if live:
-        _plot(out, "mountaincar_live_morph.png", "Baseline 1.0 → 1.4 m while driving", "training car steps",
-              "steps to goal", [(f"seed {r['seed']}", [s for s, _ in r["curve"]], [m for _, m in r["curve"]])
-                                for r in res if r["kind"] == "live"], logy=True, vline=morph_at)
+        _plot(
+            out,
+            "mountaincar_live_morph.png",
+            "Baseline 1.0 → 1.4 m while driving",
+            "training car steps",
+            "steps to goal",
+            [
+                (f"seed {r['seed']}", [s for s, _ in r["curve"]], [m for _, m in r["curve"]])
+                for r in res
+                if r["kind"] == "live"
+            ],
+            logy=True,
+            vline=morph_at,
+        )
     return {"results": res, "finals": finals, "ci95": ci, "welch_p": tests, "live": live, "markdown": "\n".join(lines)}
 
 
@@ -312,8 +504,11 @@ CHAPTERS = {"gridworld": gridworld, "retina": retina, "vergence": vergence, "mou
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("reproduce", help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar)",
-                       description=__doc__)
+    p = sub.add_parser(
+        "reproduce",
+        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar)",
+        description=__doc__,
+    )
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")
     p.add_argument("--runs", type=int, default=10, help="seeded runs per condition (default 10)")
     p.add_argument("--quick", action="store_true", help="shortened runs, for a first look (about a minute)")
@@ -330,8 +525,11 @@ def main_args(args: argparse.Namespace) -> int:
     out = os.path.join(args.out, args.chapter)
     os.makedirs(out, exist_ok=True)
     t0 = time.time()
-    print(f"sme reproduce {args.chapter}: {args.runs} runs{' (quick)' if args.quick else ''}, "
-          f"{args.workers} workers, writing {out}/ ...", flush=True)
+    print(
+        f"sme reproduce {args.chapter}: {args.runs} runs{' (quick)' if args.quick else ''}, "
+        f"{args.workers} workers, writing {out}/ ...",
+        flush=True,
+    )
     res = CHAPTERS[args.chapter](args.runs, args.quick, args.workers, out)
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(res, f, default=float)

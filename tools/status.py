@@ -14,10 +14,13 @@ from sensorimotor.tools.common import status_dict
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("status", help="ask the agent daemon for its status",
-                       description="Query the daemon's status: uptime, each world link (state, steps, "
-                       "episodes, embedding version, last Procrustes error, rejected inputs by kind) and "
-                       "daemon counters.")
+    p = sub.add_parser(
+        "status",
+        help="ask the agent daemon for its status",
+        description="Query the daemon's status: uptime, each world link (state, steps, "
+        "episodes, embedding version, last Procrustes error, rejected inputs by kind) and "
+        "daemon counters.",
+    )
     p.add_argument("--agent", default=keys.DEFAULT_AGENT_ID, help="agent id (default: a0)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the reply")
@@ -47,10 +50,12 @@ def main_args(args: argparse.Namespace) -> int:
     print(f"agent {d['agent']}  up {d['uptime']:.1f} s  counters {d['counters']}")
     for ln in d["links"]:
         err = ln["last_procrustes_error"]
-        print(f"  world {ln['world']:<12} {ln['kind']:<10} {ln['state']:<8} program={ln['program']:<10} "
-              f"steps={ln['steps']:<8} episodes={ln['episodes']:<6} embedding v{ln['embedding_version']:<4} "
-              f"procrustes={'n/a' if err is None else f'{err:.4f}'} reward_mean={ln['reward_mean']:.4f} "
-              f"rejected={ln['rejected'] or '{}'}")
+        print(
+            f"  world {ln['world']:<12} {ln['kind']:<10} {ln['state']:<8} program={ln['program']:<10} "
+            f"steps={ln['steps']:<8} episodes={ln['episodes']:<6} embedding v{ln['embedding_version']:<4} "
+            f"procrustes={'n/a' if err is None else f'{err:.4f}'} reward_mean={ln['reward_mean']:.4f} "
+            f"rejected={ln['rejected'] or '{}'}"
+        )
     if not d["links"]:
         print("  no worlds attached (start one with `sme world gridworld`)")
     return 0

@@ -64,8 +64,14 @@ class RerunLogger:
                 e = codec.decode(Embedding, payload)
                 self._time(t, e.step)
                 pts = e.coordinates if e.coordinates.shape[1] >= 2 else np.c_[e.coordinates, np.zeros(len(e.ids))]
-                rr.log(f"{wid}/embedding", rr.Points2D(pts[:, :2], colors=truth_colours(self.truth.get(wid), e.ids),
-                                                       radii=0.5 if len(e.ids) < 200 else 0.2))
+                rr.log(
+                    f"{wid}/embedding",
+                    rr.Points2D(
+                        pts[:, :2],
+                        colors=truth_colours(self.truth.get(wid), e.ids),
+                        radii=0.5 if len(e.ids) < 200 else 0.2,
+                    ),
+                )
                 if e.procrustes_error is not None:
                     rr.log(f"{wid}/procrustes_error", rr.Scalars(e.procrustes_error))
                 rr.log(f"{wid}/events", rr.TextLog(f"embedding v{e.version} ({e.trigger})", level="INFO"))
@@ -103,14 +109,27 @@ class RerunLogger:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("view", help="live view in Rerun (or of a recording)", description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "view",
+        help="live view in Rerun (or of a recording)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("file", nargs="?", default=None, help="a recording (.mcap) to show instead of the live bus")
-    p.add_argument("--save", default=None, metavar="FILE.rrd", help="write to an .rrd file (for a machine with no screen)")
-    p.add_argument("--serve", action="store_true",
-                   help="serve a gRPC stream for a viewer elsewhere (`rerun URL`); note: rerun binds all interfaces")
-    p.add_argument("--connect-viewer", default=None, metavar="URL",
-                   help="stream to a running Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+    p.add_argument(
+        "--save", default=None, metavar="FILE.rrd", help="write to an .rrd file (for a machine with no screen)"
+    )
+    p.add_argument(
+        "--serve",
+        action="store_true",
+        help="serve a gRPC stream for a viewer elsewhere (`rerun URL`); note: rerun binds all interfaces",
+    )
+    p.add_argument(
+        "--connect-viewer",
+        default=None,
+        metavar="URL",
+        help="stream to a running Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy",
+    )
     p.add_argument("--seconds", type=float, default=None, help="live: stop after this many seconds")
     p.add_argument("--agent", default=keys.DEFAULT_AGENT_ID, help="agent whose status is polled (default a0)")
     add_bus_arguments(p, "world")
@@ -149,8 +168,13 @@ def main_args(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
     t0 = time.monotonic()
     with bus:
-        for expr in (keys.ALL_EMBEDDINGS, keys.ALL_EVENTS, keys.ALL_OBS, f"{keys.PREFIX}/world/*/truth",
-                     f"{keys.PREFIX}/world/*/image/*"):
+        for expr in (
+            keys.ALL_EMBEDDINGS,
+            keys.ALL_EVENTS,
+            keys.ALL_OBS,
+            f"{keys.PREFIX}/world/*/truth",
+            f"{keys.PREFIX}/world/*/image/*",
+        ):
             bus.subscribe(expr, lambda m: inbox.append((m, time.time())))
         last_poll = 0.0
         while not stop.is_set() and (args.seconds is None or time.monotonic() - t0 < args.seconds):

@@ -27,13 +27,19 @@ log = logging.getLogger("sme.watch")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("watch", help="print embedding versions and agent events as they arrive",
-                       description="Subscribe to the agent's embeddings and events and print them. Waits for "
-                       "the agent if it is not up yet. Exit status 1 if --timeout passes before --count "
-                       "embeddings arrived (130 if Ctrl-C comes first).")
-    p.add_argument("--json", action="store_true",
-                   help="one JSON object per line: embeddings carry world, version, trigger, n_points, dims, "
-                   "eigenvalues, procrustes_error, step, metrics; events carry kind and detail")
+    p = sub.add_parser(
+        "watch",
+        help="print embedding versions and agent events as they arrive",
+        description="Subscribe to the agent's embeddings and events and print them. Waits for "
+        "the agent if it is not up yet. Exit status 1 if --timeout passes before --count "
+        "embeddings arrived (130 if Ctrl-C comes first).",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object per line: embeddings carry world, version, trigger, n_points, dims, "
+        "eigenvalues, procrustes_error, step, metrics; events carry kind and detail",
+    )
     p.add_argument("--coords", action="store_true", help="include ids and coordinates in --json output")
     p.add_argument("--count", type=int, default=None, metavar="N", help="exit after N embeddings")
     p.add_argument("--timeout", type=float, default=None, metavar="S", help="exit after S seconds")
@@ -112,7 +118,6 @@ def main_args(args: argparse.Namespace) -> int:
     if args.count is not None and seen[0] < args.count:
         if interrupted.is_set():
             return EXIT_INTERRUPTED
-        print(f"sme watch: timed out after {args.timeout} s with {seen[0]} of {args.count} embeddings",
-              file=sys.stderr)
+        print(f"sme watch: timed out after {args.timeout} s with {seen[0]} of {args.count} embeddings", file=sys.stderr)
         return 1
     return 0

@@ -16,25 +16,44 @@ log = logging.getLogger("sme.world")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("world", help="attach a world simulator",
-                       description="Serve a world on the bus in lockstep: publish observation k, wait for the "
-                       "agent's action k (resend after --resend seconds, then keep waiting). The agent "
-                       "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ". "
-                       "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.")
+    p = sub.add_parser(
+        "world",
+        help="attach a world simulator",
+        description="Serve a world on the bus in lockstep: publish observation k, wait for the "
+        "agent's action k (resend after --resend seconds, then keep waiting). The agent "
+        "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ". "
+        "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.",
+    )
     p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)))
     p.add_argument("--id", default=None, help="world id (default: the world name)")
-    p.add_argument("--param", action="append", metavar="K=V",
-                   help="world parameter, repeatable (e.g. gridworld: size=7 barrier=true actions=8 goal=3,3); "
-                   "unknown keys and bad values are refused; see --list-params")
-    p.add_argument("--list-params", action="store_true",
-                   help="print the world's parameters (name, type, default, doc) and exit; without NAME, every world's")
+    p.add_argument(
+        "--param",
+        action="append",
+        metavar="K=V",
+        help="world parameter, repeatable (e.g. gridworld: size=7 barrier=true actions=8 goal=3,3); "
+        "unknown keys and bad values are refused; see --list-params",
+    )
+    p.add_argument(
+        "--list-params",
+        action="store_true",
+        help="print the world's parameters (name, type, default, doc) and exit; without NAME, every world's",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the world's random generator")
-    p.add_argument("--resend", type=float, default=0.5, metavar="S",
-                   help="republish an unanswered observation after S seconds (default 0.5)")
+    p.add_argument(
+        "--resend",
+        type=float,
+        default=0.5,
+        metavar="S",
+        help="republish an unanswered observation after S seconds (default 0.5)",
+    )
     p.add_argument("--steps", type=int, default=None, help="stop after this many steps")
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
-    p.add_argument("--stats-json", default=None, metavar="FILE",
-                   help="write loop statistics (steps, steps/s, round-trip p50/p99) as JSON when done")
+    p.add_argument(
+        "--stats-json",
+        default=None,
+        metavar="FILE",
+        help="write loop statistics (steps, steps/s, round-trip p50/p99) as JSON when done",
+    )
     p.add_argument("--warmup", type=int, default=200, help="steps excluded from latency statistics")
     add_bus_arguments(p, "world")
     p.set_defaults(func=main_args)
@@ -78,8 +97,16 @@ def main_args(args: argparse.Namespace) -> int:
         log.error("%s", e)
         return 2
     with bus, world:
-        node = WorldNode(world, bus, args.id or args.name, resend=args.resend, max_steps=args.steps,
-                         seconds=args.seconds, measure=args.stats_json is not None, warmup=args.warmup)
+        node = WorldNode(
+            world,
+            bus,
+            args.id or args.name,
+            resend=args.resend,
+            max_steps=args.steps,
+            seconds=args.seconds,
+            measure=args.stats_json is not None,
+            warmup=args.warmup,
+        )
         node.install_signal_handlers()
         stats = node.run()
     summary = stats.summary()

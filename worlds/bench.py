@@ -24,8 +24,9 @@ class BenchWorld(World):
     kind = "bench"
     Params = BenchWorldParams
 
-    def __init__(self, world_id: str = "bench", seed: int = 0, params: BenchWorldParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, world_id: str = "bench", seed: int = 0, params: BenchWorldParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(world_id, seed)
         self.params = prm = parse(BenchWorldParams, overrides, name=self.kind, base=params)
         obs_bytes, episode_steps = prm.obs_bytes, prm.episode_steps
@@ -34,8 +35,13 @@ class BenchWorld(World):
         self.t = 0
 
     def spec(self) -> WorldSpec:
-        return WorldSpec(self.world_id, self.kind, (SensorSpec("frame", "float32", self.frame.shape),),
-                         ActionSpace(n=2), program="echo")
+        return WorldSpec(
+            self.world_id,
+            self.kind,
+            (SensorSpec("frame", "float32", self.frame.shape),),
+            ActionSpace(n=2),
+            program="echo",
+        )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
         self.t = 0

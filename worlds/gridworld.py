@@ -52,8 +52,9 @@ class GridWorld(World):
     kind = "gridworld"
     Params = GridWorldParams
 
-    def __init__(self, world_id: str = "g0", seed: int = 0, params: GridWorldParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, world_id: str = "g0", seed: int = 0, params: GridWorldParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(world_id, seed)
         self.params = prm = parse(GridWorldParams, overrides, name=self.kind, base=params)
         size, barrier, actions, goal = prm.size, prm.barrier, prm.actions, prm.goal
@@ -77,12 +78,20 @@ class GridWorld(World):
     def spec(self) -> WorldSpec:
         n = len(self.cells)
         return WorldSpec(
-            world_id=self.world_id, kind=self.kind,
+            world_id=self.world_id,
+            kind=self.kind,
             sensors=(SensorSpec("state", "int32", (1,), 0, n - 1, "opaque state id (shuffled cell index)"),),
-            action_space=ActionSpace(n=len(self.moves), names=self.names), reward_min=0.0, reward_max=1.0,
-            program="gridworld", n_starts=n,
-            params={"size": str(self.size), "barrier": str(self.barrier).lower(),
-                    "actions": str(len(self.moves)), "goal": f"{self.goal[0]},{self.goal[1]}"},
+            action_space=ActionSpace(n=len(self.moves), names=self.names),
+            reward_min=0.0,
+            reward_max=1.0,
+            program="gridworld",
+            n_starts=n,
+            params={
+                "size": str(self.size),
+                "barrier": str(self.barrier).lower(),
+                "actions": str(len(self.moves)),
+                "goal": f"{self.goal[0]},{self.goal[1]}",
+            },
         )
 
     def _obs(self, reward: float, done: bool) -> StepResult:

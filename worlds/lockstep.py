@@ -44,8 +44,18 @@ class Lockstep:
     def observation(self, timestamp: float = 0.0) -> Observation:
         """The observation of the current step."""
         r = self.result
-        return Observation(self.world_id, self.episode, self.step, self.t, r.tensors, float(r.reward), bool(r.done),
-                           self.start, timestamp, self.session)
+        return Observation(
+            self.world_id,
+            self.episode,
+            self.step,
+            self.t,
+            r.tensors,
+            float(r.reward),
+            bool(r.done),
+            self.start,
+            timestamp,
+            self.session,
+        )
 
     def _reset(self, start: int) -> None:
         self.start = start
@@ -64,9 +74,15 @@ class Lockstep:
                 self.t += 1
         except ValueError as e:
             what = "reset" if self.result.done or action.reset else "action"
-            refused = WorldEvent(self.world_id, WorldEventKind.ACTION_REFUSED, f"bad_{what}",
-                                 f"step {action.step}: {e}; a new episode starts instead", action.step, self.session,
-                                 time.time())
+            refused = WorldEvent(
+                self.world_id,
+                WorldEventKind.ACTION_REFUSED,
+                f"bad_{what}",
+                f"step {action.step}: {e}; a new episode starts instead",
+                action.step,
+                self.session,
+                time.time(),
+            )
             self._reset(-1)
         self.step += 1
         return refused

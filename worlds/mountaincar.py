@@ -64,23 +64,49 @@ class MountainCarWorld(VergenceWorld):
     kind = "mountaincar"
     Params = MountainCarWorldParams
 
-    def __init__(self, world_id: str = "mountaincar", seed: int = 0, params: MountainCarWorldParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self,
+        world_id: str = "mountaincar",
+        seed: int = 0,
+        params: MountainCarWorldParams | None = None,
+        **overrides: Any,
+    ) -> None:
         prm = parse(MountainCarWorldParams, overrides, name=self.kind, base=params)
         baseline, vertical, sign_distance, track_scale = prm.baseline, prm.vertical, prm.sign_distance, prm.track_scale
-        n_positions, n_eval, eval_seed, fovea, fovea_deg = prm.n_positions, prm.n_eval, prm.eval_seed, prm.fovea, prm.fovea_deg
+        n_positions, n_eval, eval_seed, fovea, fovea_deg = (
+            prm.n_positions,
+            prm.n_eval,
+            prm.eval_seed,
+            prm.fovea,
+            prm.fovea_deg,
+        )
         max_vergence, max_car_steps, render_grid = prm.max_vergence, prm.max_car_steps, prm.render_grid
         goal_window, cache_size = prm.goal_window, prm.cache_size
         self.car = MountainCarParams()
         if track_scale <= 0 or sign_distance - self.car.x_max * track_scale <= 0.2:
             raise ValueError("the sign must stay at least 0.2 m ahead of the robot over the whole track")
         if n_positions < 2 or n_eval < 0 or max_car_steps < 1 or render_grid <= 0 or max_vergence < 2:
-            raise ValueError("need n_positions >= 2, n_eval >= 0, max_car_steps >= 1, render_grid > 0, max_vergence >= 2")
+            raise ValueError(
+                "need n_positions >= 2, n_eval >= 0, max_car_steps >= 1, render_grid > 0, max_vergence >= 2"
+            )
         self.track_scale, self.render_grid, self.goal_window = track_scale, render_grid, goal_window
         self.max_car_steps, self.n_positions, self.n_eval = max_car_steps, n_positions, n_eval
-        super().__init__(world_id, seed, VergenceWorldParams(
-            baseline=baseline, sign_distance=sign_distance, n_starts=n_positions, nearest=0.5, fovea=fovea,
-            fovea_deg=fovea_deg, max_steps=max_vergence, vertical=vertical, sign_radius=0.9, room=True))
+        super().__init__(
+            world_id,
+            seed,
+            VergenceWorldParams(
+                baseline=baseline,
+                sign_distance=sign_distance,
+                n_starts=n_positions,
+                nearest=0.5,
+                fovea=fovea,
+                fovea_deg=fovea_deg,
+                max_steps=max_vergence,
+                vertical=vertical,
+                sign_radius=0.9,
+                room=True,
+            ),
+        )
         self.params = prm
         xs = np.linspace(self.car.x_min, self.car.goal, n_positions + 1)[:-1]
         self.starts = np.vstack([np.c_[xs, np.zeros_like(xs)], evaluation_states(n_eval, eval_seed, self.car)])
@@ -88,7 +114,9 @@ class MountainCarWorld(VergenceWorld):
         self.x, self.v = float(xs[0]), 0.0
         self.car_t = 0
         self._cache_size = cache_size
-        self._images: collections.OrderedDict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = collections.OrderedDict()
+        self._images: collections.OrderedDict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = (
+            collections.OrderedDict()
+        )
         self._goals: dict[int, int] = {}
         self.renders = 0
 
@@ -131,13 +159,26 @@ class MountainCarWorld(VergenceWorld):
     def spec(self) -> WorldSpec:
         f = (self.fovea, self.fovea)
         return WorldSpec(
-            world_id=self.world_id, kind=self.kind,
-            sensors=(SensorSpec("left", "float32", f, 0, 1, "left fovea"), SensorSpec("right", "float32", f, 0, 1, "right fovea")),
+            world_id=self.world_id,
+            kind=self.kind,
+            sensors=(
+                SensorSpec("left", "float32", f, 0, 1, "left fovea"),
+                SensorSpec("right", "float32", f, 0, 1, "right fovea"),
+            ),
             action_space=ActionSpace(n=5, names=("converge", "diverge", "reverse", "coast", "forward")),
-            reward_min=0.0, reward_max=1.0, program="mountaincar", n_starts=len(self.starts),
-            params={"baseline": str(self.baseline), "vertical": str(self.vertical).lower(), "step_rad": str(self.step_rad),
-                    "n_positions": str(self.n_positions), "n_eval": str(self.n_eval),
-                    "max_car_steps": str(self.max_car_steps), "max_vergence": str(self.max_episode_steps)},
+            reward_min=0.0,
+            reward_max=1.0,
+            program="mountaincar",
+            n_starts=len(self.starts),
+            params={
+                "baseline": str(self.baseline),
+                "vertical": str(self.vertical).lower(),
+                "step_rad": str(self.step_rad),
+                "n_positions": str(self.n_positions),
+                "n_eval": str(self.n_eval),
+                "max_car_steps": str(self.max_car_steps),
+                "max_vergence": str(self.max_episode_steps),
+            },
         )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
@@ -177,6 +218,13 @@ class MountainCarWorld(VergenceWorld):
         raise PerturbationError(f"mountaincar has no perturbation {control.kind!r}; use morph or heal")
 
     def truth(self) -> Truth:
-        return Truth(self.world_id, "start_states",
-                     {"positions": self.true_angle(self.distances)[:, None], "distance": self.distances[:, None].copy(),
-                      "x": self.starts[:, :1].copy(), "v": self.starts[:, 1:].copy()})
+        return Truth(
+            self.world_id,
+            "start_states",
+            {
+                "positions": self.true_angle(self.distances)[:, None],
+                "distance": self.distances[:, None].copy(),
+                "x": self.starts[:, :1].copy(),
+                "v": self.starts[:, 1:].copy(),
+            },
+        )

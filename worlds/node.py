@@ -42,8 +42,8 @@ class NodeStats:
     steps: int = 0
     episodes: int = 0
     resends: int = 0
-    published: int = 0          # observations put on the bus (resends included)
-    actions_received: int = 0   # valid actions received (duplicates and stale ones included)
+    published: int = 0  # observations put on the bus (resends included)
+    actions_received: int = 0  # valid actions received (duplicates and stale ones included)
     rejected: dict[str, int] = field(default_factory=dict)
     controls: int = 0
     latencies: list[float] = field(default_factory=list)
@@ -53,15 +53,21 @@ class NodeStats:
 
     def summary(self) -> dict:
         lat = np.asarray(self.latencies) * 1e3
-        out = {"steps": self.steps, "episodes": self.episodes, "resends": self.resends,
-               "published": self.published, "actions_received": self.actions_received,
-               "controls": self.controls, "rejected": dict(self.rejected), "seconds": round(self.seconds, 3),
-               "steps_per_s": round(self.steps / self.seconds, 1) if self.seconds else 0.0}
+        out = {
+            "steps": self.steps,
+            "episodes": self.episodes,
+            "resends": self.resends,
+            "published": self.published,
+            "actions_received": self.actions_received,
+            "controls": self.controls,
+            "rejected": dict(self.rejected),
+            "seconds": round(self.seconds, 3),
+            "steps_per_s": round(self.steps / self.seconds, 1) if self.seconds else 0.0,
+        }
         if self.measured_seconds:
             out["steady_steps_per_s"] = round(self.measured_steps / self.measured_seconds, 1)
         if lat.size:
-            out.update(p50_ms=round(float(np.percentile(lat, 50)), 4),
-                       p99_ms=round(float(np.percentile(lat, 99)), 4))
+            out.update(p50_ms=round(float(np.percentile(lat, 50)), 4), p99_ms=round(float(np.percentile(lat, 99)), 4))
         return out
 
 
@@ -98,9 +104,19 @@ class _ActionSlot:
 class WorldNode:
     """Runs one World on a Bus until stopped or a bound (`max_steps`, `seconds`) is reached."""
 
-    def __init__(self, world: World, bus: Bus, world_id: str | None = None, *, resend: float = 0.5,
-                 max_steps: int | None = None, seconds: float | None = None, measure: bool = False,
-                 warmup: int = 0, image_every: int = 10) -> None:
+    def __init__(
+        self,
+        world: World,
+        bus: Bus,
+        world_id: str | None = None,
+        *,
+        resend: float = 0.5,
+        max_steps: int | None = None,
+        seconds: float | None = None,
+        measure: bool = False,
+        warmup: int = 0,
+        image_every: int = 10,
+    ) -> None:
         self.world = world
         self.bus = bus
         self.world_id = keys.check_id(world_id or world.world_id, "world id")
@@ -145,8 +161,9 @@ class WorldNode:
 
     def _refresh_truth(self) -> None:
         tr = self.world.truth()
-        self._truth_bytes = None if tr is None else codec.encode(replace(tr, world_id=self.world_id,
-                                                                        timestamp=time.time()))
+        self._truth_bytes = (
+            None if tr is None else codec.encode(replace(tr, world_id=self.world_id, timestamp=time.time()))
+        )
 
     def _answer_truth(self, key: str, payload: bytes | None) -> bytes:
         if self._truth_bytes is None:
@@ -162,15 +179,33 @@ class WorldNode:
                 what = self.world.perturb(ctl)
                 self.stats.controls += 1
                 log.info("world %s: %s", self.world_id, what)
-                self._world_event(WorldEvent(self.world_id, WorldEventKind.CONTROL_APPLIED, ctl.kind, what,
-                                             session=self.session, timestamp=time.time()))
+                self._world_event(
+                    WorldEvent(
+                        self.world_id,
+                        WorldEventKind.CONTROL_APPLIED,
+                        ctl.kind,
+                        what,
+                        session=self.session,
+                        timestamp=time.time(),
+                    )
+                )
                 self._refresh_truth()
                 if self._truth_bytes is not None:
-                    self.bus.put(keys.world_truth(self.world_id), self._truth_bytes, codec.schema_name(type(self.world.truth())))
+                    self.bus.put(
+                        keys.world_truth(self.world_id), self._truth_bytes, codec.schema_name(type(self.world.truth()))
+                    )
             except (PerturbationError, ValueError) as e:
                 self._reject("bad_control", f"control {ctl.kind!r}: {e}")
-                self._world_event(WorldEvent(self.world_id, WorldEventKind.CONTROL_REFUSED, ctl.kind, str(e),
-                                             session=self.session, timestamp=time.time()))
+                self._world_event(
+                    WorldEvent(
+                        self.world_id,
+                        WorldEventKind.CONTROL_REFUSED,
+                        ctl.kind,
+                        str(e),
+                        session=self.session,
+                        timestamp=time.time(),
+                    )
+                )
 
     def _publish(self, pub, lock: Lockstep) -> bytes:
         now = time.time()
@@ -211,8 +246,11 @@ class WorldNode:
         bus.subscribe(keys.world_act(wid), self._on_action)
         bus.subscribe(keys.world_ctl(wid), self._on_control)
         pub = bus.publisher(keys.world_obs(wid), codec.schema_name(Observation))
-        self._image_pub = (bus.publisher(keys.world_image(wid, "camera"), images.SCHEMA, block=False)
-                           if self.image_every > 0 and type(self.world).frame is not World.frame else None)
+        self._image_pub = (
+            bus.publisher(keys.world_image(wid, "camera"), images.SCHEMA, block=False)
+            if self.image_every > 0 and type(self.world).frame is not World.frame
+            else None
+        )
         bus.token(keys.alive_world(wid))
         log.info("world %s (%s) serving on the bus, session %s", wid, self.world.kind, self.session)
 

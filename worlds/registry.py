@@ -32,14 +32,17 @@ class WorldKind:
 
 WORLDS: dict[str, WorldKind] = {
     "gridworld": WorldKind("gridworld", "GridWorld", "GridWorldParams", "gridworld of Fig 5.1 (ch. 5)"),
-    "gridworld-barrier": WorldKind("gridworld", "GridWorld", "BarrierGridWorldParams",
-                                   "the gridworld with the S-shaped barrier of Fig 5.1b"),
+    "gridworld-barrier": WorldKind(
+        "gridworld", "GridWorld", "BarrierGridWorldParams", "the gridworld with the S-shaped barrier of Fig 5.1b"
+    ),
     "retina": WorldKind("retina", "RetinaWorld", "RetinaWorldParams", "foveated retina on a pan/tilt camera (ch. 4)"),
     "vergence": WorldKind("vergence", "VergenceWorld", "VergenceWorldParams", "depth from vergence (ch. 7)"),
-    "stereo": WorldKind("stereo_pair", "StereoPairWorld", "StereoPairParams",
-                        "vergence on the Middlebury motorcycle pair (ch. 7.2.2)"),
-    "mountaincar": WorldKind("mountaincar", "MountainCarWorld", "MountainCarWorldParams",
-                             "the visual mountain car (ch. 8)"),
+    "stereo": WorldKind(
+        "stereo_pair", "StereoPairWorld", "StereoPairParams", "vergence on the Middlebury motorcycle pair (ch. 7.2.2)"
+    ),
+    "mountaincar": WorldKind(
+        "mountaincar", "MountainCarWorld", "MountainCarWorldParams", "the visual mountain car (ch. 8)"
+    ),
     "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }
 
@@ -62,8 +65,7 @@ def parse_world_params(name: str, params: Mapping[str, Any] | None = None) -> An
     return parse(world_params(name), params or {}, name=name)
 
 
-def make_world(name: str, world_id: str | None = None, seed: int = 0,
-               params: Mapping[str, Any] | None = None) -> World:
+def make_world(name: str, world_id: str | None = None, seed: int = 0, params: Mapping[str, Any] | None = None) -> World:
     """Build world kind `name`; `params` are validated against its declaration first."""
     kind = world_kind(name)
     prm = parse(kind.params_type(), params or {}, name=name)

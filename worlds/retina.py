@@ -68,8 +68,9 @@ class RetinaWorld(World):
     max_episode_steps = 1
     Params = RetinaWorldParams
 
-    def __init__(self, world_id: str = "retina", seed: int = 0, params: RetinaWorldParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, world_id: str = "retina", seed: int = 0, params: RetinaWorldParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(world_id, seed)
         self.params = prm = parse(RetinaWorldParams, overrides, name=self.kind, base=params)
         layers, fields, field_px, fov_deg = prm.layers, prm.fields, prm.field_px, prm.fov_deg
@@ -101,9 +102,12 @@ class RetinaWorld(World):
         self._spot_world: list[np.ndarray] = []
         self._build_scene(spot_px, n_spots)
         res = fields * supersample
-        self._proj = [self._client.computeProjectionMatrixFOV(
-            math.degrees(2 * math.atan(math.tan(math.radians(fov_deg) / 2) / 2**L)), 1.0, 0.1, 2 * wall_distance)
-            for L in range(layers)]
+        self._proj = [
+            self._client.computeProjectionMatrixFOV(
+                math.degrees(2 * math.atan(math.tan(math.radians(fov_deg) / 2) / 2**L)), 1.0, 0.1, 2 * wall_distance
+            )
+            for L in range(layers)
+        ]
         self._res = res
         self._frame: np.ndarray | None = None
 
@@ -128,8 +132,13 @@ class RetinaWorld(World):
         for i in range(k):
             yz = np.zeros(2) if i == 0 else rng.uniform(-1, 1, 2) * self.wall * 0.25
             pos = np.array([self.wall - 0.002, yz[0], yz[1]])
-            vis = c.createVisualShape(p.GEOM_CYLINDER, radius=radius, length=0.002, rgbaColor=[1, 1, 1, 1],
-                                      visualFrameOrientation=c.getQuaternionFromEuler([0, math.pi / 2, 0]))
+            vis = c.createVisualShape(
+                p.GEOM_CYLINDER,
+                radius=radius,
+                length=0.002,
+                rgbaColor=[1, 1, 1, 1],
+                visualFrameOrientation=c.getQuaternionFromEuler([0, math.pi / 2, 0]),
+            )
             c.createMultiBody(0, baseVisualShapeIndex=vis, basePosition=pos.tolist())
             self._spot_world.append(pos)
 
@@ -152,8 +161,15 @@ class RetinaWorld(World):
         ss, f = self.supersample, self.fields
         acts = []
         for L in range(self.layers):
-            _, _, rgb, _, _ = c.getCameraImage(self._res, self._res, view, self._proj[L], shadow=0,
-                                               renderer=p.ER_TINY_RENDERER, flags=p.ER_NO_SEGMENTATION_MASK)
+            _, _, rgb, _, _ = c.getCameraImage(
+                self._res,
+                self._res,
+                view,
+                self._proj[L],
+                shadow=0,
+                renderer=p.ER_TINY_RENDERER,
+                flags=p.ER_NO_SEGMENTATION_MASK,
+            )
             img = np.asarray(rgb, dtype=np.float32).reshape(self._res, self._res, 4)[..., :3].mean(axis=2) / 255.0
             if L == 0:
                 self._frame = img
@@ -194,13 +210,25 @@ class RetinaWorld(World):
     def spec(self) -> WorldSpec:
         m = self.max_saccade
         return WorldSpec(
-            world_id=self.world_id, kind=self.kind,
-            sensors=(SensorSpec("fields", "float32", (self.n,), 0.0, 1.0,
-                                "receptive-field activations in a fixed shuffled order"),),
+            world_id=self.world_id,
+            kind=self.kind,
+            sensors=(
+                SensorSpec(
+                    "fields", "float32", (self.n,), 0.0, 1.0, "receptive-field activations in a fixed shuffled order"
+                ),
+            ),
             action_space=ActionSpace(low=(-m, -m), high=(m, m), names=("pan_deg", "tilt_deg")),
-            reward_min=0.0, reward_max=float(self.n), program="retina", n_starts=0,
-            params={"layers": str(self.layers), "fields": str(self.fields), "field_px": str(self.field_px),
-                    "scene": self.scene, "fov_deg": str(self.fov_deg)},
+            reward_min=0.0,
+            reward_max=float(self.n),
+            program="retina",
+            n_starts=0,
+            params={
+                "layers": str(self.layers),
+                "fields": str(self.fields),
+                "field_px": str(self.field_px),
+                "scene": self.scene,
+                "fov_deg": str(self.fov_deg),
+            },
         )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:

@@ -25,14 +25,15 @@ from sensorimotor.worlds.base import StepResult, World
 from sensorimotor.worlds.vergence import foveal_difference, verge
 
 
-def salient_points(img: np.ndarray, disp: np.ndarray, n: int, radius: int, max_shift: int, spacing: int = 25,
-                   sigma: float = 2.0) -> np.ndarray:
+def salient_points(
+    img: np.ndarray, disp: np.ndarray, n: int, radius: int, max_shift: int, spacing: int = 25, sigma: float = 2.0
+) -> np.ndarray:
     """[n, 2] (row, col) of the strongest gradient-energy maxima, at least `spacing` px apart."""
     g = ndimage.gaussian_filter(img, sigma)
     energy = ndimage.gaussian_filter(ndimage.sobel(g, 0) ** 2 + ndimage.sobel(g, 1) ** 2, 3 * sigma)
     h, w = img.shape
     valid = np.zeros_like(img, dtype=bool)
-    valid[radius:h - radius, radius + max_shift:w - radius] = True
+    valid[radius : h - radius, radius + max_shift : w - radius] = True
     valid &= np.isfinite(disp)
     peaks = (energy == ndimage.maximum_filter(energy, size=spacing)) & valid
     rows, cols = np.nonzero(peaks)
@@ -54,8 +55,9 @@ class StereoPairWorld(World):
     kind = "stereo"
     Params = StereoPairParams
 
-    def __init__(self, world_id: str = "stereo", seed: int = 0, params: StereoPairParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, world_id: str = "stereo", seed: int = 0, params: StereoPairParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(world_id, seed)
         self.params = prm = parse(StereoPairParams, overrides, name=self.kind, base=params)
         n_starts, radius, max_shift, uniqueness = prm.n_starts, prm.radius, prm.max_shift, prm.uniqueness
@@ -83,20 +85,32 @@ class StereoPairWorld(World):
         self.row, self.col = row, col
         d = self._differences()
         k = int(np.argmin(d))
-        others = np.r_[d[:max(k - 3, 0)], d[k + 4:]]
+        others = np.r_[d[: max(k - 3, 0)], d[k + 4 :]]
         return others.size == 0 or d[k] < uniqueness * others.min()
 
     def _patches(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         r, c, R = self.row, self.col, self.radius
-        return (self.left[r - R:r + R + 1, c - R:c + R + 1].copy(),
-                self.right[r - R:r + R + 1, c - k - R:c - k + R + 1].copy())
+        return (
+            self.left[r - R : r + R + 1, c - R : c + R + 1].copy(),
+            self.right[r - R : r + R + 1, c - k - R : c - k + R + 1].copy(),
+        )
 
     def spec(self) -> WorldSpec:
         f = (2 * self.radius + 1,) * 2
-        return WorldSpec(self.world_id, self.kind,
-                         (SensorSpec("left", "float32", f, 0, 1, "left fovea"), SensorSpec("right", "float32", f, 0, 1, "right fovea")),
-                         ActionSpace(n=2, names=("converge", "diverge")), 0.0, 1.0, "vergence", len(self.points),
-                         {"dataset": "Middlebury motorcycle (scikit-image)"})
+        return WorldSpec(
+            self.world_id,
+            self.kind,
+            (
+                SensorSpec("left", "float32", f, 0, 1, "left fovea"),
+                SensorSpec("right", "float32", f, 0, 1, "right fovea"),
+            ),
+            ActionSpace(n=2, names=("converge", "diverge")),
+            0.0,
+            1.0,
+            "vergence",
+            len(self.points),
+            {"dataset": "Middlebury motorcycle (scikit-image)"},
+        )
 
     def _obs(self, reward: float, done: bool) -> StepResult:
         left, right = self._patches(self.k)

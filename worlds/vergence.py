@@ -86,8 +86,9 @@ class VergenceWorld(World):
     kind = "vergence"
     Params = VergenceWorldParams
 
-    def __init__(self, world_id: str = "vergence", seed: int = 0, params: VergenceWorldParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, world_id: str = "vergence", seed: int = 0, params: VergenceWorldParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(world_id, seed)
         self.params = prm = parse(VergenceWorldParams, overrides, name=self.kind, base=params)
         baseline, sign_distance, n_starts, nearest = prm.baseline, prm.sign_distance, prm.n_starts, prm.nearest
@@ -104,8 +105,8 @@ class VergenceWorld(World):
         self.distances = np.linspace(nearest, sign_distance, n_starts)
         self.z = float(self.distances[-1])
         self.theta = 0.0
-        self.k = 0      # vergence in steps
-        self.goal = 0   # the step where d is minimal
+        self.k = 0  # vergence in steps
+        self.goal = 0  # the step where d is minimal
         self.t = 0
         self._c = BulletClient(connection_mode=p.DIRECT)
         self._build()
@@ -123,8 +124,9 @@ class VergenceWorld(World):
         for i in range(8):
             idx += [0, 1 + i, 1 + (i + 1) % 8]
         uvs = [[0.5, 0.5]] + [[0.5 + 0.5 * math.cos(a), 0.5 + 0.5 * math.sin(a)] for a in ang]
-        vis = c.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx + idx[::-1], uvs=uvs,
-                                  rgbaColor=[1.0, 0.25, 0.2, 1.0])
+        vis = c.createVisualShape(
+            p.GEOM_MESH, vertices=verts, indices=idx + idx[::-1], uvs=uvs, rgbaColor=[1.0, 0.25, 0.2, 1.0]
+        )
         self._sign = c.createMultiBody(0, baseVisualShapeIndex=vis, basePosition=[self.sign_distance, 0, 1.2])
         if self.room:
             self._build_room(vis)
@@ -136,8 +138,9 @@ class VergenceWorld(World):
         # a textured backdrop: eyes that cross past the sign see different things, not a blank wall
         back = c.createVisualShape(p.GEOM_BOX, halfExtents=[0.01, 6, 6], rgbaColor=[0.7, 0.8, 0.7, 1])
         wall = c.createMultiBody(0, baseVisualShapeIndex=back, basePosition=[self.sign_distance + 4.0, 0, 1.2])
-        c.changeVisualShape(wall, -1, textureUniqueId=c.loadTexture(os.path.join(pybullet_data.getDataPath(),
-                                                                                  "checker_grid.jpg")))
+        c.changeVisualShape(
+            wall, -1, textureUniqueId=c.loadTexture(os.path.join(pybullet_data.getDataPath(), "checker_grid.jpg"))
+        )
 
     def _build_room(self, sign_visual: int) -> None:
         """Smooth-noise textures on the sign and on a closed room around the track. With eyes a metre
@@ -151,11 +154,19 @@ class VergenceWorld(World):
             c.changeVisualShape(self._sign, -1, rgbaColor=[1, 1, 1, 1], textureUniqueId=c.loadTexture(sign_png))
             tex = c.loadTexture(room_png)
         s = self.sign_distance
-        walls = [([0.01, 12, 12], [s + 6, 0, 1.2]), ([0.01, 12, 12], [s - 12, 0, 1.2]), ([12, 0.01, 12], [s - 3, 8, 1.2]),
-                 ([12, 0.01, 12], [s - 3, -8, 1.2]), ([12, 12, 0.01], [s - 3, 0, -0.01]), ([12, 12, 0.01], [s - 3, 0, 8])]
+        walls = [
+            ([0.01, 12, 12], [s + 6, 0, 1.2]),
+            ([0.01, 12, 12], [s - 12, 0, 1.2]),
+            ([12, 0.01, 12], [s - 3, 8, 1.2]),
+            ([12, 0.01, 12], [s - 3, -8, 1.2]),
+            ([12, 12, 0.01], [s - 3, 0, -0.01]),
+            ([12, 12, 0.01], [s - 3, 0, 8]),
+        ]
         for half, pos in walls:
             shape = c.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[1, 1, 1, 1])
-            c.changeVisualShape(c.createMultiBody(0, baseVisualShapeIndex=shape, basePosition=pos), -1, textureUniqueId=tex)
+            c.changeVisualShape(
+                c.createMultiBody(0, baseVisualShapeIndex=shape, basePosition=pos), -1, textureUniqueId=tex
+            )
 
     # geometry ----------------------------------------------------------------------------------
     def _eyes(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -184,10 +195,20 @@ class VergenceWorld(World):
         up = [0.0, 1.0, 0.0] if self.vertical else [0.0, 0.0, 1.0]
         for pos, d in self._eyes():
             view = self._c.computeViewMatrix(pos.tolist(), (pos + d).tolist(), up)
-            _, _, rgb, _, _ = self._c.getCameraImage(self.fovea, self.fovea, view, self._proj, shadow=0,
-                                                     renderer=p.ER_TINY_RENDERER, flags=p.ER_NO_SEGMENTATION_MASK)
-            imgs.append((np.asarray(rgb, dtype=np.float32).reshape(self.fovea, self.fovea, 4)[..., :3].mean(axis=2)
-                         / 255.0).astype(np.float32))
+            _, _, rgb, _, _ = self._c.getCameraImage(
+                self.fovea,
+                self.fovea,
+                view,
+                self._proj,
+                shadow=0,
+                renderer=p.ER_TINY_RENDERER,
+                flags=p.ER_NO_SEGMENTATION_MASK,
+            )
+            imgs.append(
+                (
+                    np.asarray(rgb, dtype=np.float32).reshape(self.fovea, self.fovea, 4)[..., :3].mean(axis=2) / 255.0
+                ).astype(np.float32)
+            )
         return imgs[0], imgs[1]
 
     def differences(self, ks: range | None = None) -> np.ndarray:
@@ -206,11 +227,22 @@ class VergenceWorld(World):
     def spec(self) -> WorldSpec:
         f = (self.fovea, self.fovea)
         return WorldSpec(
-            world_id=self.world_id, kind=self.kind,
-            sensors=(SensorSpec("left", "float32", f, 0, 1, "left fovea"), SensorSpec("right", "float32", f, 0, 1, "right fovea")),
-            action_space=ActionSpace(n=2, names=("converge", "diverge")), reward_min=0.0, reward_max=1.0,
-            program="vergence", n_starts=len(self.distances),
-            params={"baseline": str(self.baseline), "vertical": str(self.vertical).lower(), "step_rad": str(self.step_rad)},
+            world_id=self.world_id,
+            kind=self.kind,
+            sensors=(
+                SensorSpec("left", "float32", f, 0, 1, "left fovea"),
+                SensorSpec("right", "float32", f, 0, 1, "right fovea"),
+            ),
+            action_space=ActionSpace(n=2, names=("converge", "diverge")),
+            reward_min=0.0,
+            reward_max=1.0,
+            program="vergence",
+            n_starts=len(self.distances),
+            params={
+                "baseline": str(self.baseline),
+                "vertical": str(self.vertical).lower(),
+                "step_rad": str(self.step_rad),
+            },
         )
 
     def _obs(self, reward: float, done: bool) -> StepResult:
@@ -247,8 +279,11 @@ class VergenceWorld(World):
         raise PerturbationError(f"vergence has no perturbation {control.kind!r}; use morph or heal")
 
     def truth(self) -> Truth:
-        return Truth(self.world_id, "start_states",
-                     {"positions": self.true_angle(self.distances)[:, None], "distance": self.distances[:, None].copy()})
+        return Truth(
+            self.world_id,
+            "start_states",
+            {"positions": self.true_angle(self.distances)[:, None], "distance": self.distances[:, None].copy()},
+        )
 
     def close(self) -> None:
         disconnect(self._c)

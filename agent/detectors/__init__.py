@@ -22,5 +22,13 @@ def make_detector(name: str = DEFAULT_DETECTOR, **params) -> DropDetector:
     return cls(**{k: v for k, v in params.items() if k in accepted})
 
 
-__all__ = ["CUSUM", "DETECTORS", "DEFAULT_DETECTOR", "DropDetector", "MovingAverageDrop", "PageHinkley",
-           "RunningMoments", "make_detector"]
+__all__ = [
+    "CUSUM",
+    "DETECTORS",
+    "DEFAULT_DETECTOR",
+    "DropDetector",
+    "MovingAverageDrop",
+    "PageHinkley",
+    "RunningMoments",
+    "make_detector",
+]

@@ -110,8 +110,7 @@ class RunningMoments:
 
     def state(self) -> dict[str, Any]:
         """The moments and the samples still waiting to join (warmup, rate, lag are configuration)."""
-        return {"pending": list(self._pending), "count": self.count, "mean": self.mean, "m2": self._m2,
-                "var": self.var}
+        return {"pending": list(self._pending), "count": self.count, "mean": self.mean, "m2": self._m2, "var": self.var}
 
     def restore(self, state: dict[str, Any]) -> None:
         self._pending = collections.deque(float(x) for x in state["pending"])

@@ -36,8 +36,15 @@ class PageHinkley(DropDetector):
         return self._m - self._min
 
     def state(self) -> dict[str, Any]:
-        return {**super().state(), "count": self._count, "mean": self._mean, "m2": self._m2, "sd": self._sd,
-                "m": self._m, "min": self._min}
+        return {
+            **super().state(),
+            "count": self._count,
+            "mean": self._mean,
+            "m2": self._m2,
+            "sd": self._sd,
+            "m": self._m,
+            "min": self._min,
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         super().restore(state)

@@ -25,8 +25,24 @@ from sensorimotor.agent.embedding.trace_distances import (
 )
 
 __all__ = [
-    "MDSModel", "MDSResult", "classical_mds", "double_centre", "LandmarkResult", "landmark_mds",
-    "landmark_trace_embedding", "maxmin_landmarks", "ProcrustesResult", "SimilarityTransform", "fit_similarity", "procrustes", "procrustes_error",
-    "PreparedTraces", "continuous_trace_distances", "edit_trace_distances", "pad_traces", "trace_cross_distances", "trace_distances",
+    "MDSModel",
+    "MDSResult",
+    "classical_mds",
+    "double_centre",
+    "LandmarkResult",
+    "landmark_mds",
+    "landmark_trace_embedding",
+    "maxmin_landmarks",
+    "ProcrustesResult",
+    "SimilarityTransform",
+    "fit_similarity",
+    "procrustes",
+    "procrustes_error",
+    "PreparedTraces",
+    "continuous_trace_distances",
+    "edit_trace_distances",
+    "pad_traces",
+    "trace_cross_distances",
+    "trace_distances",
     "update_trace_distances",
 ]

@@ -24,7 +24,7 @@ FULL_BELOW = 600
 
 @dataclass(frozen=True)
 class MDSModel:
-    basis: np.ndarray    # [n_ref, k]: V_k / sqrt(lambda_k) (0 where lambda <= 0)
+    basis: np.ndarray  # [n_ref, k]: V_k / sqrt(lambda_k) (0 where lambda <= 0)
     mean_sq: np.ndarray  # [n_ref]: column means of D^2 over the reference points
 
     def transform(self, d_ref: np.ndarray) -> np.ndarray:

@@ -20,10 +20,10 @@ DistancesTo = Callable[[np.ndarray], np.ndarray]  # landmark indices [m] -> dist
 
 @dataclass(frozen=True)
 class LandmarkResult:
-    coordinates: np.ndarray   # [n, k]
-    eigenvalues: np.ndarray   # spectrum of the landmark embedding
-    landmarks: np.ndarray     # indices of the landmarks
-    model: MDSModel           # places any new point from its distances to the landmarks
+    coordinates: np.ndarray  # [n, k]
+    eigenvalues: np.ndarray  # spectrum of the landmark embedding
+    landmarks: np.ndarray  # indices of the landmarks
+    model: MDSModel  # places any new point from its distances to the landmarks
 
 
 def maxmin_landmarks(n: int, m: int, distances_to: DistancesTo, seed: int = 0) -> np.ndarray:
@@ -41,9 +41,15 @@ def maxmin_landmarks(n: int, m: int, distances_to: DistancesTo, seed: int = 0) -
     return np.array(chosen)
 
 
-def landmark_mds(n: int, distances_to: DistancesTo, k: int = 2, n_landmarks: int = 300, seed: int = 0,
-                 select: str = "maxmin", candidate_distances_to: Callable[[np.ndarray], tuple[np.ndarray, DistancesTo]]
-                 | None = None) -> LandmarkResult:
+def landmark_mds(
+    n: int,
+    distances_to: DistancesTo,
+    k: int = 2,
+    n_landmarks: int = 300,
+    seed: int = 0,
+    select: str = "maxmin",
+    candidate_distances_to: Callable[[np.ndarray], tuple[np.ndarray, DistancesTo]] | None = None,
+) -> LandmarkResult:
     """`candidate_distances_to(pool)` (optional) gives distances among a candidate pool cheaply;
     max-min selection then runs on a random pool of 10 m points instead of all n."""
     if n < 2:
@@ -66,12 +72,25 @@ def landmark_mds(n: int, distances_to: DistancesTo, k: int = 2, n_landmarks: int
     return LandmarkResult(Y, res.eigenvalues, L, res.model)
 
 
-def landmark_trace_embedding(traces, k: int = 2, n_landmarks: int = 300, kind: str = "continuous",
-                             pad: str = "append", substitution_cost: int = 1, seed: int = 0) -> LandmarkResult:
+def landmark_trace_embedding(
+    traces,
+    k: int = 2,
+    n_landmarks: int = 300,
+    kind: str = "continuous",
+    pad: str = "append",
+    substitution_cost: int = 1,
+    seed: int = 0,
+) -> LandmarkResult:
     """Landmark MDS of action traces; the model then places new traces without re-embedding
     (`trace_cross_distances(new, [traces[i] for i in result.landmarks])` -> `result.model.transform`)."""
     from sensorimotor.agent.embedding.trace_distances import PreparedTraces
 
     prepared = PreparedTraces(traces, kind, pad, substitution_cost)
-    return landmark_mds(len(traces), prepared.distances_to, k, n_landmarks, seed,
-                        candidate_distances_to=lambda pool: prepared.subset(pool).distances_to)
+    return landmark_mds(
+        len(traces),
+        prepared.distances_to,
+        k,
+        n_landmarks,
+        seed,
+        candidate_distances_to=lambda pool: prepared.subset(pool).distances_to,
+    )

@@ -11,7 +11,7 @@ import numpy as np
 @dataclass(frozen=True)
 class ProcrustesResult:
     disparity: float
-    truth: np.ndarray    # standardised truth (centred, unit Frobenius norm)
+    truth: np.ndarray  # standardised truth (centred, unit Frobenius norm)
     aligned: np.ndarray  # embedding after the best similarity transform onto `truth`
 
 

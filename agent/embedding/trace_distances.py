@@ -50,7 +50,7 @@ def pad_traces(traces: Sequence[np.ndarray], pad: str = "append", length: int | 
             if pad == "append":
                 out[i, : a.shape[0]] = a
             else:
-                out[i, L - a.shape[0]:] = a
+                out[i, L - a.shape[0] :] = a
     return out
 
 
@@ -69,13 +69,24 @@ def _edit(a: Sequence, b: Sequence, substitution_cost: int, dtype: np.dtype) -> 
     sb = sa if b is a else [[int(x) for x in t] for t in b]
     if not sa or not sb:
         raise ValueError("no traces")
-    D = rf_cdist(sa, sb, scorer=Levenshtein.distance, dtype=np.int32, workers=-1,
-                 scorer_kwargs={"weights": (1, 1, int(substitution_cost))})
+    D = rf_cdist(
+        sa,
+        sb,
+        scorer=Levenshtein.distance,
+        dtype=np.int32,
+        workers=-1,
+        scorer_kwargs={"weights": (1, 1, int(substitution_cost))},
+    )
     return D.astype(dtype)
 
 
-def trace_distances(traces: Sequence, kind: str = "continuous", pad: str = "append", substitution_cost: int = 1,
-                    dtype: type = np.float64) -> np.ndarray:
+def trace_distances(
+    traces: Sequence,
+    kind: str = "continuous",
+    pad: str = "append",
+    substitution_cost: int = 1,
+    dtype: type = np.float64,
+) -> np.ndarray:
     """The n x n matrix of pairwise trace distances (zero diagonal, symmetric)."""
     _check_kind(kind)
     if kind == "edit":
@@ -92,8 +103,14 @@ def trace_distances(traces: Sequence, kind: str = "continuous", pad: str = "appe
     return out
 
 
-def trace_cross_distances(a: Sequence, b: Sequence, kind: str = "continuous", pad: str = "append",
-                          substitution_cost: int = 1, dtype: type = np.float64) -> np.ndarray:
+def trace_cross_distances(
+    a: Sequence,
+    b: Sequence,
+    kind: str = "continuous",
+    pad: str = "append",
+    substitution_cost: int = 1,
+    dtype: type = np.float64,
+) -> np.ndarray:
     """Distances from each trace in `a` to each trace in `b`: [len(a), len(b)]."""
     _check_kind(kind)
     if kind == "edit":
@@ -102,8 +119,13 @@ def trace_cross_distances(a: Sequence, b: Sequence, kind: str = "continuous", pa
     if kind == "dtw":
         L = max(max(x.shape[0] for x in A + B), 1)
         out = np.zeros((len(A), len(B)), dtype=dtype)
-        K.dtw_cross(pad_traces(A, length=L), np.array([x.shape[0] for x in A]), pad_traces(B, length=L),
-                    np.array([x.shape[0] for x in B]), out)
+        K.dtw_cross(
+            pad_traces(A, length=L),
+            np.array([x.shape[0] for x in A]),
+            pad_traces(B, length=L),
+            np.array([x.shape[0] for x in B]),
+            out,
+        )
         return out
     L = max(max(x.shape[0] for x in A + B), 1)
     out = np.empty((len(A), len(B)), dtype=dtype)
@@ -111,8 +133,14 @@ def trace_cross_distances(a: Sequence, b: Sequence, kind: str = "continuous", pa
     return out
 
 
-def update_trace_distances(D: np.ndarray, traces: Sequence, changed: Sequence[int], kind: str = "continuous",
-                           pad: str = "append", substitution_cost: int = 1) -> np.ndarray:
+def update_trace_distances(
+    D: np.ndarray,
+    traces: Sequence,
+    changed: Sequence[int],
+    kind: str = "continuous",
+    pad: str = "append",
+    substitution_cost: int = 1,
+) -> np.ndarray:
     """Recompute, in place, only the rows and columns of `D` whose traces changed; returns `D`.
     Costs O(len(changed) * n) trace comparisons instead of O(n^2)."""
     idx = np.unique(np.asarray(changed, dtype=np.int64))
@@ -139,8 +167,9 @@ class PreparedTraces:
     """Traces converted once to the form the kernels take (padded array, lengths, or integer
     sequences), for repeated distance queries against members (landmark selection, streaming)."""
 
-    def __init__(self, traces: Sequence, kind: str = "continuous", pad: str = "append",
-                 substitution_cost: int = 1) -> None:
+    def __init__(
+        self, traces: Sequence, kind: str = "continuous", pad: str = "append", substitution_cost: int = 1
+    ) -> None:
         _check_kind(kind)
         self.kind, self.pad, self.substitution_cost = kind, pad, substitution_cost
         self.n = len(traces)

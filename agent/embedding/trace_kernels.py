@@ -19,6 +19,7 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 # --- numpy references --------------------------------------------------------------------------
 
+
 def padded_sum_pairs_numpy(X: np.ndarray, out: np.ndarray) -> None:
     out[:] = 0
     for t in range(X.shape[1]):
@@ -148,11 +149,18 @@ def padded_sum_cross(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
         padded_sum_cross_numpy(A, B, out)
 
 
-def dtw_cross(A: np.ndarray, la: np.ndarray, B: np.ndarray, lb: np.ndarray, out: np.ndarray,
-              symmetric: bool = False) -> None:
+def dtw_cross(
+    A: np.ndarray, la: np.ndarray, B: np.ndarray, lb: np.ndarray, out: np.ndarray, symmetric: bool = False
+) -> None:
     if HAVE_NUMBA:
-        _dtw_cross(np.ascontiguousarray(A, dtype=np.float64), la.astype(np.int64), np.ascontiguousarray(B, dtype=np.float64),
-                   lb.astype(np.int64), out, symmetric)
+        _dtw_cross(
+            np.ascontiguousarray(A, dtype=np.float64),
+            la.astype(np.int64),
+            np.ascontiguousarray(B, dtype=np.float64),
+            lb.astype(np.int64),
+            out,
+            symmetric,
+        )
         return
     for i in range(A.shape[0]):
         for j in range(B.shape[0]):

@@ -55,13 +55,19 @@ class RBFBasis:
         m = f.shape[1]
         for j in range(self.n_actions):
             rows = a == j
-            out[rows, j * m:(j + 1) * m] = f[rows]
+            out[rows, j * m : (j + 1) * m] = f[rows]
         return out
 
 
 class LSPI:
-    def __init__(self, basis: TabularBasis, gamma: float = 0.9, ridge: float = 1e-3,
-                 capacity: int = 50_000, tie_tolerance: float = 0.05) -> None:
+    def __init__(
+        self,
+        basis: TabularBasis,
+        gamma: float = 0.9,
+        ridge: float = 1e-3,
+        capacity: int = 50_000,
+        tie_tolerance: float = 0.05,
+    ) -> None:
         if not 0.0 <= gamma < 1.0:
             raise ValueError("gamma must be in [0, 1)")
         if ridge < 0:
@@ -86,9 +92,15 @@ class LSPI:
 
     def state(self) -> dict[str, Any]:
         """The stored samples, weights and iteration count (the basis and settings are configuration)."""
-        return {"s": np.array(self._s), "a": np.array(self._a, dtype=np.int64), "r": np.array(self._r, dtype=np.float64),
-                "s_next": np.array(self._s2), "done": np.array(self._done, dtype=bool), "w": self.w.copy(),
-                "iterations": self.iterations}
+        return {
+            "s": np.array(self._s),
+            "a": np.array(self._a, dtype=np.int64),
+            "r": np.array(self._r, dtype=np.float64),
+            "s_next": np.array(self._s2),
+            "done": np.array(self._done, dtype=bool),
+            "w": self.w.copy(),
+            "iterations": self.iterations,
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from a `state()` snapshot of an LSPI with the same basis."""
@@ -135,8 +147,9 @@ class LSPI:
 
     def _greedy_many(self, states: np.ndarray) -> np.ndarray:
         n = self.basis.n_actions
-        Q = np.stack([np.asarray(self.basis.phi(states, np.full(states.size, a)) @ self.w).reshape(-1)
-                      for a in range(n)], axis=1)
+        Q = np.stack(
+            [np.asarray(self.basis.phi(states, np.full(states.size, a)) @ self.w).reshape(-1) for a in range(n)], axis=1
+        )
         return self._tied(Q).argmax(axis=1)
 
     def _tied(self, Q: np.ndarray) -> np.ndarray:

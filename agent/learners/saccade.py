@@ -31,9 +31,18 @@ EXPLORATION = ("relearn", "gamma", "gaussian")
 
 
 class SaccadeLearner:
-    def __init__(self, n_fields: int, low: np.ndarray, high: np.ndarray, alpha: float = 0.5,
-                 noise_sd: float | None = None, rule: str = "robust", exploration: str = "relearn",
-                 init_spread: float = 1.0, seed: int = 0) -> None:
+    def __init__(
+        self,
+        n_fields: int,
+        low: np.ndarray,
+        high: np.ndarray,
+        alpha: float = 0.5,
+        noise_sd: float | None = None,
+        rule: str = "robust",
+        exploration: str = "relearn",
+        init_spread: float = 1.0,
+        seed: int = 0,
+    ) -> None:
         low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         if n_fields < 1:
             raise ValueError("n_fields must be >= 1")
@@ -72,9 +81,17 @@ class SaccadeLearner:
 
     def state(self) -> dict[str, Any]:
         """Preferences, reward estimates, experience, exploration reference and the generator."""
-        return {"seed": self.seed, "rng": rng_state(self.rng), "pi": self.pi.copy(), "R": self.R.copy(),
-                "experience": self.experience.copy(), "r_ref": self.r_ref, "updates": self.updates,
-                "resets": self.resets, "relearning": self.relearning}
+        return {
+            "seed": self.seed,
+            "rng": rng_state(self.rng),
+            "pi": self.pi.copy(),
+            "R": self.R.copy(),
+            "experience": self.experience.copy(),
+            "r_ref": self.r_ref,
+            "updates": self.updates,
+            "resets": self.resets,
+            "relearning": self.relearning,
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from a `state()` snapshot of a learner with the same fields and action box."""
@@ -128,8 +145,10 @@ class SaccadeLearner:
         d = np.asarray(delta, dtype=np.float64)
         a = np.asarray(action, dtype=np.float64)
         if d.shape != (self.n_fields,) or a.shape != self.low.shape:
-            raise ValueError(f"expected delta [{self.n_fields}] and action {list(self.low.shape)}, "
-                             f"got {list(d.shape)} and {list(a.shape)}")
+            raise ValueError(
+                f"expected delta [{self.n_fields}] and action {list(self.low.shape)}, "
+                f"got {list(d.shape)} and {list(a.shape)}"
+            )
         if not np.isfinite(reward):
             raise ValueError("reward must be finite")
         self.r_ref += self.REF_RATE * (float(reward) - self.r_ref) if self.updates else float(reward)

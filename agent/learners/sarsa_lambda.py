@@ -38,8 +38,16 @@ class TileCoder:
 
 
 class SarsaLambda:
-    def __init__(self, coder: TileCoder, n_actions: int, alpha: float = 0.3, gamma: float = 0.99,
-                 lam: float = 0.9, epsilon: float = 0.0, seed: int = 0) -> None:
+    def __init__(
+        self,
+        coder: TileCoder,
+        n_actions: int,
+        alpha: float = 0.3,
+        gamma: float = 0.99,
+        lam: float = 0.9,
+        epsilon: float = 0.0,
+        seed: int = 0,
+    ) -> None:
         if not 0 < alpha <= 1 or not 0 <= gamma <= 1 or not 0 <= lam <= 1 or not 0 <= epsilon <= 1:
             raise ValueError("need 0 < alpha <= 1 and gamma, lambda, epsilon in [0, 1]")
         self.coder, self.n_actions = coder, n_actions

@@ -41,8 +41,9 @@ class GridworldProgram(Program):
     name = "gridworld"
     Params = GridworldProgramParams
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, params: GridworldProgramParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, spec: WorldSpec, seed: int = 0, params: GridworldProgramParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(spec, seed)
         self.params = prm = parse(GridworldProgramParams, overrides, name=self.name, base=params)
         samples_per_iteration, max_trace, gamma, ridge = prm.samples_per_iteration, prm.max_trace, prm.gamma, prm.ridge
@@ -106,14 +107,22 @@ class GridworldProgram(Program):
         self.version += 1
         reached = self._sweep.rewarded
         trigger = Trigger.RANDOM_POLICY if self.policy == "random" else Trigger.POLICY_ITERATION
-        self.emit(EmbeddingOutput(
-            trigger=trigger, iteration=0 if self.policy == "random" else self.lspi.iterations,
-            ids=tuple(range(len(traces))), coordinates=mds.coordinates,
-            eigenvalues=tuple(float(e) for e in mds.eigenvalues[: min(10, len(mds.eigenvalues))]), step=step,
-            metrics={"lspi_iterations": float(self.lspi.iterations), "samples": float(self.lspi.n_samples),
-                     "goal_reached_fraction": reached / len(traces),
-                     "mean_trace_length": float(np.mean([len(t) for t in traces]))},
-        ))
+        self.emit(
+            EmbeddingOutput(
+                trigger=trigger,
+                iteration=0 if self.policy == "random" else self.lspi.iterations,
+                ids=tuple(range(len(traces))),
+                coordinates=mds.coordinates,
+                eigenvalues=tuple(float(e) for e in mds.eigenvalues[: min(10, len(mds.eigenvalues))]),
+                step=step,
+                metrics={
+                    "lspi_iterations": float(self.lspi.iterations),
+                    "samples": float(self.lspi.n_samples),
+                    "goal_reached_fraction": reached / len(traces),
+                    "mean_trace_length": float(np.mean([len(t) for t in traces])),
+                },
+            )
+        )
 
     # the program -------------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
@@ -128,9 +137,14 @@ class GridworldProgram(Program):
                 self.new_samples = 0
                 if self.policy == "lspi":
                     change = self.lspi.iterate()
-                    self.emit(EventOutput(EventKind.POLICY_ITERATION, f"LSPI iteration {self.lspi.iterations}",
-                                          obs.step, {"weight_change": change,
-                                                     "samples": float(self.lspi.n_samples)}))
+                    self.emit(
+                        EventOutput(
+                            EventKind.POLICY_ITERATION,
+                            f"LSPI iteration {self.lspi.iterations}",
+                            obs.step,
+                            {"weight_change": change, "samples": float(self.lspi.n_samples)},
+                        )
+                    )
                 self.phase, self._seen = "embed", set()
                 self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
                 return self._sweep.begin()
@@ -149,15 +163,27 @@ class GridworldProgram(Program):
 
     # saved state ---------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
-        return {**super().state(), "lspi": self.lspi.state(), "phase": self.phase, "new_samples": self.new_samples,
-                "version": self.version, "prev": None if self._prev is None else list(self._prev),
-                "sweep": self._sweep.state(), "seen": sorted(list(p) for p in self._seen),
-                "last_traces": [list(t) for t in self._last_traces], "D": array_or_none(self._D)}
+        return {
+            **super().state(),
+            "lspi": self.lspi.state(),
+            "phase": self.phase,
+            "new_samples": self.new_samples,
+            "version": self.version,
+            "prev": None if self._prev is None else list(self._prev),
+            "sweep": self._sweep.state(),
+            "seen": sorted(list(p) for p in self._seen),
+            "last_traces": [list(t) for t in self._last_traces],
+            "D": array_or_none(self._D),
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         super().restore(state)
         self.lspi.restore(state["lspi"])
-        self.phase, self.new_samples, self.version = str(state["phase"]), int(state["new_samples"]), int(state["version"])
+        self.phase, self.new_samples, self.version = (
+            str(state["phase"]),
+            int(state["new_samples"]),
+            int(state["version"]),
+        )
         self._prev = tuple_or_none(state["prev"])
         self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
         self._sweep.restore(state["sweep"])

@@ -80,16 +80,31 @@ class MountainCarProgram(Program):
 
     Params = MountainCarProgramParams
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, params: MountainCarProgramParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, spec: WorldSpec, seed: int = 0, params: MountainCarProgramParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(spec, seed)
         self.params = prm = parse(MountainCarProgramParams, overrides, name=self.name, base=params)
-        samples_per_iteration, epsilon, vergence_gamma, ridge = prm.samples_per_iteration, prm.epsilon, prm.vergence_gamma, prm.ridge
-        max_trace, alpha, gamma, lam, tiles, n_tilings = prm.max_trace, prm.alpha, prm.gamma, prm.lam, prm.tiles, prm.n_tilings
+        samples_per_iteration, epsilon, vergence_gamma, ridge = (
+            prm.samples_per_iteration,
+            prm.epsilon,
+            prm.vergence_gamma,
+            prm.ridge,
+        )
+        max_trace, alpha, gamma, lam, tiles, n_tilings = (
+            prm.max_trace,
+            prm.alpha,
+            prm.gamma,
+            prm.lam,
+            prm.tiles,
+            prm.n_tilings,
+        )
         drive_epsilon, eval_every, n_eval, watch_after = prm.drive_epsilon, prm.eval_every, prm.n_eval, prm.watch_after
         report_after, process_var = prm.report_after, prm.process_var
         if not spec.action_space.discrete or spec.action_space.n != 5:
-            raise SpecMismatch("mountaincar program needs 5 discrete actions (converge, diverge, reverse, coast, forward)")
+            raise SpecMismatch(
+                "mountaincar program needs 5 discrete actions (converge, diverge, reverse, coast, forward)"
+            )
         spec.sensor("left"), spec.sensor("right")
         try:
             self.n_positions = int(spec.params.get("n_positions", "0"))
@@ -106,10 +121,12 @@ class MountainCarProgram(Program):
             raise ValueError("report_after must be >= 1")
         self.eval_every, self.watch_after, self.process_var = eval_every, watch_after, process_var
         self.report_after = report_after
-        self.lspi = LSPI(RBFBasis(tuple(float(c) for c in np.linspace(0.0, 0.3, 13)), 0.025, 2),
-                         gamma=vergence_gamma, ridge=ridge)
-        self._sarsa_args = dict(alpha=alpha, gamma=gamma, lam=lam, tiles=tiles, n_tilings=n_tilings,
-                                epsilon=drive_epsilon)
+        self.lspi = LSPI(
+            RBFBasis(tuple(float(c) for c in np.linspace(0.0, 0.3, 13)), 0.025, 2), gamma=vergence_gamma, ridge=ridge
+        )
+        self._sarsa_args = dict(
+            alpha=alpha, gamma=gamma, lam=lam, tiles=tiles, n_tilings=n_tilings, epsilon=drive_epsilon
+        )
         self.sarsa: SarsaLambda | None = None
         self.practice = VergencePractice(self.lspi, self.rng, samples_per_iteration, epsilon)
         self.phase = "explore"
@@ -153,8 +170,9 @@ class MountainCarProgram(Program):
         return Decision((float(self.practice.choose(d)),))
 
     def _sweeping(self, obs: Observation) -> Decision:
-        dec = self._sweep.step(obs, lambda o, tr: self.lspi.greedy(foveal_difference(o)),
-                               stop=lambda o, tr: o.reward > 0)
+        dec = self._sweep.step(
+            obs, lambda o, tr: self.lspi.greedy(foveal_difference(o)), stop=lambda o, tr: o.reward > 0
+        )
         if not self._sweep.finished:
             return dec
         if self._sweep.rewarded < self.n_positions:
@@ -184,11 +202,21 @@ class MountainCarProgram(Program):
             self._make_driver(float(coords.min()), float(coords.max()))
         self.landmarks, self._model, self._positions, self._verge = traces, mds.model, {}, {}
         n = len(traces)
-        self.emit(EmbeddingOutput(
-            Trigger.RELEARNED if relearned else Trigger.POLICY_ITERATION, tuple(range(n)), coords,
-            tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
-            {"lspi_iterations": float(self.lspi.iterations), "mean_trace_length": float(np.mean([len(t) for t in traces]))},
-            iteration=self.lspi.iterations, drop_step=self.relearn_at if relearned else None))
+        self.emit(
+            EmbeddingOutput(
+                Trigger.RELEARNED if relearned else Trigger.POLICY_ITERATION,
+                tuple(range(n)),
+                coords,
+                tuple(float(e) for e in mds.eigenvalues[: min(10, n)]),
+                step,
+                {
+                    "lspi_iterations": float(self.lspi.iterations),
+                    "mean_trace_length": float(np.mean([len(t) for t in traces])),
+                },
+                iteration=self.lspi.iterations,
+                drop_step=self.relearn_at if relearned else None,
+            )
+        )
 
     def position(self, trace: list[int]) -> float:
         """The agent's position: the embedding coordinate of a vergence trace (out of sample)."""
@@ -217,7 +245,7 @@ class MountainCarProgram(Program):
 
     def _filter(self) -> VelocityFilter:
         """Measurement noise: a position is quantised to one vergence step (uniform, variance q^2/12)."""
-        return VelocityFilter(measurement_var=self.quantum ** 2 / 12, process_var=self.process_var * self.quantum ** 2)
+        return VelocityFilter(measurement_var=self.quantum**2 / 12, process_var=self.process_var * self.quantum**2)
 
     @property
     def evaluating(self) -> bool:
@@ -283,10 +311,15 @@ class MountainCarProgram(Program):
             mean = float(np.mean(self._eval_steps))
             self.curve.append((self.training_steps, mean))
             failed = int(sum(not r for r in self._eval_reached))
-            self.emit(EventOutput(EventKind.EVALUATION, f"mean steps to goal {mean:.1f} from {self.n_eval} states after "
-                                  f"{self.training_steps} training steps", obs.step,
-                                  {"steps_to_goal": mean, "training_steps": float(self.training_steps),
-                                   "failures": float(failed)}))
+            self.emit(
+                EventOutput(
+                    EventKind.EVALUATION,
+                    f"mean steps to goal {mean:.1f} from {self.n_eval} states after "
+                    f"{self.training_steps} training steps",
+                    obs.step,
+                    {"steps_to_goal": mean, "training_steps": float(self.training_steps), "failures": float(failed)},
+                )
+            )
             self.phase = "drive"
             self._start_training_episode()
             return Decision(reset=True, start=-1)
@@ -348,24 +381,53 @@ class MountainCarProgram(Program):
         and seed it was built from, so `restore` rebuilds it the same way."""
         driver = None
         if self.sarsa is not None:
-            driver = {"low": self.sarsa.coder.low.copy(), "high": self.sarsa.coder.high.copy(),
-                      "sarsa": self.sarsa.state(), "filter": self._kf.state()}
-        model = None if self._model is None else {"basis": self._model.basis.copy(), "mean_sq": self._model.mean_sq.copy()}
-        align = None if self._align is None else {"scale": self._align.scale, "rotation": self._align.rotation.copy(),
-                                                  "translation": self._align.translation.copy()}
+            driver = {
+                "low": self.sarsa.coder.low.copy(),
+                "high": self.sarsa.coder.high.copy(),
+                "sarsa": self.sarsa.state(),
+                "filter": self._kf.state(),
+            }
+        model = (
+            None if self._model is None else {"basis": self._model.basis.copy(), "mean_sq": self._model.mean_sq.copy()}
+        )
+        align = (
+            None
+            if self._align is None
+            else {
+                "scale": self._align.scale,
+                "rotation": self._align.rotation.copy(),
+                "translation": self._align.translation.copy(),
+            }
+        )
         return {
-            **super().state(), "lspi": self.lspi.state(), "practice": self.practice.state(), "phase": self.phase,
-            "explore_len": self._explore_len, "sweep": self._sweep.state(),
-            "landmarks": [list(t) for t in self.landmarks], "model": model, "align": align,
+            **super().state(),
+            "lspi": self.lspi.state(),
+            "practice": self.practice.state(),
+            "phase": self.phase,
+            "explore_len": self._explore_len,
+            "sweep": self._sweep.state(),
+            "landmarks": [list(t) for t in self.landmarks],
+            "model": model,
+            "align": align,
             "coords0": array_or_none(self._coords0),
             "positions": [[list(k), v] for k, v in self._positions.items()],
-            "verge": [[d, a] for d, a in self._verge.items()], "quantum": self.quantum,
-            "training_steps": self.training_steps, "episodes": self.episodes, "driver": driver,
-            "trace": None if self._trace is None else list(self._trace), "last_drive": self._last_drive,
-            "s": array_or_none(self._s), "a": self._a, "ep_steps": self._ep_steps, "watching": self._watching,
-            "perf": self._perf, "eval_i": self._eval_i, "eval_steps": list(self._eval_steps),
+            "verge": [[d, a] for d, a in self._verge.items()],
+            "quantum": self.quantum,
+            "training_steps": self.training_steps,
+            "episodes": self.episodes,
+            "driver": driver,
+            "trace": None if self._trace is None else list(self._trace),
+            "last_drive": self._last_drive,
+            "s": array_or_none(self._s),
+            "a": self._a,
+            "ep_steps": self._ep_steps,
+            "watching": self._watching,
+            "perf": self._perf,
+            "eval_i": self._eval_i,
+            "eval_steps": list(self._eval_steps),
             "eval_reached": list(getattr(self, "_eval_reached", [])),
-            "curve": [list(c) for c in self.curve], "episode_log": [list(e) for e in self.episode_log],
+            "curve": [list(c) for c in self.curve],
+            "episode_log": [list(e) for e in self.episode_log],
             "relearn_at": self.relearn_at,
         }
 
@@ -379,8 +441,11 @@ class MountainCarProgram(Program):
         self.landmarks = [[int(a) for a in t] for t in state["landmarks"]]
         m, al = state["model"], state["align"]
         self._model = None if m is None else MDSModel(np.array(m["basis"]), np.array(m["mean_sq"]))
-        self._align = None if al is None else SimilarityTransform(float(al["scale"]), np.array(al["rotation"]),
-                                                                  np.array(al["translation"]))
+        self._align = (
+            None
+            if al is None
+            else SimilarityTransform(float(al["scale"]), np.array(al["rotation"]), np.array(al["translation"]))
+        )
         self._coords0 = array_or_none(state["coords0"])
         self._positions = {tuple(int(a) for a in k): float(v) for k, v in state["positions"]}
         self._verge = {float(d): int(a) for d, a in state["verge"]}
@@ -390,8 +455,12 @@ class MountainCarProgram(Program):
         if driver is None:
             self.sarsa, self._kf = None, None
         else:
-            coder = TileCoder(np.array(driver["low"]), np.array(driver["high"]), tiles=self._sarsa_args["tiles"],
-                              n_tilings=self._sarsa_args["n_tilings"])
+            coder = TileCoder(
+                np.array(driver["low"]),
+                np.array(driver["high"]),
+                tiles=self._sarsa_args["tiles"],
+                n_tilings=self._sarsa_args["n_tilings"],
+            )
             self.sarsa = self._sarsa(coder, int(driver["sarsa"]["seed"]))
             self.sarsa.restore(driver["sarsa"])
             self._kf = self._filter()

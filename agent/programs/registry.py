@@ -32,14 +32,27 @@ class ProgramKind:
 
 
 PROGRAMS: dict[str, ProgramKind] = {
-    "vergence": ProgramKind("vergence", "VergenceProgram", "VergenceProgramParams",
-                            "LSPI vergence, trace lengths embedded as depth (ch. 7)"),
-    "gridworld": ProgramKind("gridworld", "GridworldProgram", "GridworldProgramParams",
-                             "LSPI toward the goal, edit-distance embedding of greedy traces (ch. 5)"),
-    "retina": ProgramKind("retina", "RetinaProgram", "RetinaProgramParams",
-                          "saccade learning, ballistic embedding of field positions (ch. 4)"),
-    "mountaincar": ProgramKind("mountaincar", "MountainCarProgram", "MountainCarProgramParams",
-                               "vergence geometry, then Sarsa(lambda) driving on top of it (ch. 8)"),
+    "vergence": ProgramKind(
+        "vergence", "VergenceProgram", "VergenceProgramParams", "LSPI vergence, trace lengths embedded as depth (ch. 7)"
+    ),
+    "gridworld": ProgramKind(
+        "gridworld",
+        "GridworldProgram",
+        "GridworldProgramParams",
+        "LSPI toward the goal, edit-distance embedding of greedy traces (ch. 5)",
+    ),
+    "retina": ProgramKind(
+        "retina",
+        "RetinaProgram",
+        "RetinaProgramParams",
+        "saccade learning, ballistic embedding of field positions (ch. 4)",
+    ),
+    "mountaincar": ProgramKind(
+        "mountaincar",
+        "MountainCarProgram",
+        "MountainCarProgramParams",
+        "vergence geometry, then Sarsa(lambda) driving on top of it (ch. 8)",
+    ),
     "echo": ProgramKind("base", "EchoProgram", "EchoParams", "answers every observation with action 0 (benchmarks)"),
 }
 
@@ -80,6 +93,7 @@ def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
     (strings or typed values, validated against the program's declaration)."""
     name = spec.program or spec.kind
     if name not in PROGRAMS:
-        raise ValueError(f"no developmental program {name!r} for world {spec.world_id!r}; "
-                         f"known: {', '.join(sorted(PROGRAMS))}")
+        raise ValueError(
+            f"no developmental program {name!r} for world {spec.world_id!r}; known: {', '.join(sorted(PROGRAMS))}"
+        )
     return PROGRAMS[name].program_class()(spec, seed, **kw)

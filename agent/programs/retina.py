@@ -33,7 +33,9 @@ class RetinaProgramParams:
     rule: str = option("robust", "saccade learning rule (Eq 4.4-4.5 basic, Eq 4.7 robust)", choices=RULES)
     exploration: str = option("relearn", "exploration of the saccade learner", choices=EXPLORATION)
     alpha: float = option(0.5, "learning rate of the field positions", min=0.0)
-    noise_sd: float | None = option(None, "exploration noise sd, action units (none: 0.075 x the action range)", min=0.0)
+    noise_sd: float | None = option(
+        None, "exploration noise sd, action units (none: 0.075 x the action range)", min=0.0
+    )
     embed_every: int = option(1000, "saccades between periodic embeddings", min=1)
     settle_min: int = option(1000, "saccades after a drop before the reward may count as settled", min=0)
     settle_window: int = option(300, "saccades in the settled-reward window", min=1)
@@ -45,8 +47,9 @@ class RetinaProgram(Program):
     name = "retina"
     Params = RetinaProgramParams
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, params: RetinaProgramParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, spec: WorldSpec, seed: int = 0, params: RetinaProgramParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(spec, seed)
         self.params = prm = parse(RetinaProgramParams, overrides, name=self.name, base=params)
         rule, exploration, alpha, noise_sd = prm.rule, prm.exploration, prm.alpha, prm.noise_sd
@@ -56,8 +59,16 @@ class RetinaProgram(Program):
         if a.discrete or a.dims != 2:
             raise SpecMismatch(f"retina program needs a 2-D box action space, world {spec.world_id} has {a}")
         self.n = int(np.prod(spec.sensor("fields").shape))
-        self.learner = SaccadeLearner(self.n, np.array(a.low), np.array(a.high), alpha=alpha, noise_sd=noise_sd,
-                                      rule=rule, exploration=exploration, seed=seed)
+        self.learner = SaccadeLearner(
+            self.n,
+            np.array(a.low),
+            np.array(a.high),
+            alpha=alpha,
+            noise_sd=noise_sd,
+            rule=rule,
+            exploration=exploration,
+            seed=seed,
+        )
         self.embed_every = embed_every
         self.min_experience = min_experience
         self.settle_min, self.settle_window, self.settle_gain = settle_min, settle_window, settle_gain
@@ -83,10 +94,21 @@ class RetinaProgram(Program):
         X = self.learner.positions[ids]
         Xc = X - X.mean(axis=0)
         eig = np.sort(np.linalg.eigvalsh(Xc.T @ Xc))[::-1]
-        recent = self._rewards[-self.settle_window:]
-        return EmbeddingOutput(trigger, tuple(int(i) for i in ids), X.copy(), tuple(float(e) for e in eig), step,
-                               {"episodes": float(self.episodes), "reward_mean": float(np.mean(recent)) if recent else 0.0,
-                                "resets": float(self.learner.resets)}, absolute=True, drop_step=drop_step)
+        recent = self._rewards[-self.settle_window :]
+        return EmbeddingOutput(
+            trigger,
+            tuple(int(i) for i in ids),
+            X.copy(),
+            tuple(float(e) for e in eig),
+            step,
+            {
+                "episodes": float(self.episodes),
+                "reward_mean": float(np.mean(recent)) if recent else 0.0,
+                "resets": float(self.learner.resets),
+            },
+            absolute=True,
+            drop_step=drop_step,
+        )
 
     def _settled(self) -> bool:
         """Back to 90 % of the reward before the drop, or (when that level is out of reach, as
@@ -100,7 +122,7 @@ class RetinaProgram(Program):
             return True
         if since < max(self.settle_min, 2 * w):
             return False
-        before = float(np.mean(self._rewards[-2 * w:-w]))
+        before = float(np.mean(self._rewards[-2 * w : -w]))
         return now <= before * (1 + self.settle_gain) + 1e-9
 
     def act(self, obs: Observation) -> Decision:
@@ -118,9 +140,15 @@ class RetinaProgram(Program):
             if self.episodes % self.embed_every == 0:
                 self.emit(self.embedding(Trigger.PERIODIC, obs.step))
             if self._drop is not None and self._settled():
-                self.emit(EventOutput(EventKind.RELEARNED, f"reward settled {self.episodes - self._drop[1]} episodes "
-                                      f"after the drop at step {self._drop[0]}", obs.step,
-                                      {"episodes": float(self.episodes - self._drop[1])}))
+                self.emit(
+                    EventOutput(
+                        EventKind.RELEARNED,
+                        f"reward settled {self.episodes - self._drop[1]} episodes "
+                        f"after the drop at step {self._drop[0]}",
+                        obs.step,
+                        {"episodes": float(self.episodes - self._drop[1])},
+                    )
+                )
                 self.emit(self.embedding(Trigger.RELEARNED, obs.step, drop_step=self._drop[0]))
                 self.learner.end_relearning()
                 self._drop = None
@@ -136,14 +164,21 @@ class RetinaProgram(Program):
 
     def on_drop(self, step: int) -> None:
         self.learner.reset_estimates()
-        before = self._rewards[-2 * self.settle_window:-50] or self._rewards
+        before = self._rewards[-2 * self.settle_window : -50] or self._rewards
         self._drop = (step, self.episodes, float(np.mean(before)) if before else 0.0)
         self.emit(EventOutput(EventKind.RELEARNING, "reward estimates reset; exploration raised", step))
 
     def state(self) -> dict[str, Any]:
-        return {**super().state(), "learner": self.learner.state(), "episodes": self.episodes, "version": self.version,
-                "pre": array_or_none(self._pre), "action": array_or_none(self._action),
-                "rewards": list(self._rewards), "drop": None if self._drop is None else list(self._drop)}
+        return {
+            **super().state(),
+            "learner": self.learner.state(),
+            "episodes": self.episodes,
+            "version": self.version,
+            "pre": array_or_none(self._pre),
+            "action": array_or_none(self._action),
+            "rewards": list(self._rewards),
+            "drop": None if self._drop is None else list(self._drop),
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         super().restore(state)

@@ -28,8 +28,12 @@ class StartStateSweep:
     def begin(self) -> Decision:
         return Decision(reset=True, start=0)
 
-    def step(self, obs: Observation, choose: Callable[[Observation, list[int]], int],
-             stop: Callable[[Observation, list[int]], bool] | None = None) -> Decision:
+    def step(
+        self,
+        obs: Observation,
+        choose: Callable[[Observation, list[int]], int],
+        stop: Callable[[Observation, list[int]], bool] | None = None,
+    ) -> Decision:
         if self._restart or (obs.t == 0 and obs.start != self._start):
             self._restart = False  # the world or the agent restarted mid-trace: this start state again
             return Decision(reset=True, start=self._start)
@@ -48,15 +52,24 @@ class StartStateSweep:
 
     def state(self) -> dict[str, Any]:
         """Traces so far, the start state and trace in progress (n_starts, max_trace: configuration)."""
-        return {"n_starts": self.n_starts, "max_trace": self.max_trace, "traces": [list(t) for t in self.traces],
-                "rewarded": self.rewarded, "finished": self.finished, "start": self._start,
-                "trace": list(self._trace), "restart": self._restart}
+        return {
+            "n_starts": self.n_starts,
+            "max_trace": self.max_trace,
+            "traces": [list(t) for t in self.traces],
+            "rewarded": self.rewarded,
+            "finished": self.finished,
+            "start": self._start,
+            "trace": list(self._trace),
+            "restart": self._restart,
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from a `state()` snapshot of a sweep over as many start states."""
         if (state["n_starts"], state["max_trace"]) != (self.n_starts, self.max_trace):
-            raise ValueError(f"sweep state is for {state['n_starts']} start states and traces of "
-                             f"{state['max_trace']}, this sweep has {self.n_starts} and {self.max_trace}")
+            raise ValueError(
+                f"sweep state is for {state['n_starts']} start states and traces of "
+                f"{state['max_trace']}, this sweep has {self.n_starts} and {self.max_trace}"
+            )
         self.traces = [[int(a) for a in t] for t in state["traces"]]
         self.rewarded, self.finished = int(state["rewarded"]), bool(state["finished"])
         self._start, self._trace = int(state["start"]), [int(a) for a in state["trace"]]

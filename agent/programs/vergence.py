@@ -59,7 +59,14 @@ class VergencePractice:
             return False
         self.new_samples = 0
         change = self.lspi.iterate()
-        emit(EventOutput(EventKind.POLICY_ITERATION, f"LSPI iteration {self.lspi.iterations}", obs.step, {"weight_change": change}))
+        emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"LSPI iteration {self.lspi.iterations}",
+                obs.step,
+                {"weight_change": change},
+            )
+        )
         return True
 
     def state(self) -> dict[str, Any]:
@@ -87,8 +94,9 @@ class VergenceProgramParams:
     gamma: float = option(0.95, "LSPI discount", min=0.0, max=1.0)
     ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
     max_trace: int = option(100, "longest greedy trace recorded from a start state", min=1)
-    centres: tuple[float, ...] = option(tuple(float(c) for c in np.linspace(0.0, 0.2, 11)),
-                                        "RBF centres over the foveal difference d")
+    centres: tuple[float, ...] = option(
+        tuple(float(c) for c in np.linspace(0.0, 0.2, 11)), "RBF centres over the foveal difference d"
+    )
     width: float = option(0.02, "RBF width")
 
 
@@ -96,8 +104,9 @@ class VergenceProgram(Program):
     name = "vergence"
     Params = VergenceProgramParams
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, params: VergenceProgramParams | None = None,
-                 **overrides: Any) -> None:
+    def __init__(
+        self, spec: WorldSpec, seed: int = 0, params: VergenceProgramParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(spec, seed)
         self.params = prm = parse(VergenceProgramParams, overrides, name=self.name, base=params)
         samples_per_iteration, epsilon, gamma, ridge = prm.samples_per_iteration, prm.epsilon, prm.gamma, prm.ridge
@@ -134,15 +143,30 @@ class VergenceProgram(Program):
         D = trace_distances(traces, kind="edit", substitution_cost=2)
         mds = classical_mds(D, 1)
         n = len(traces)
-        self.emit(EmbeddingOutput(
-            Trigger.POLICY_ITERATION, tuple(range(n)), mds.coordinates,
-            tuple(float(e) for e in mds.eigenvalues[: min(10, n)]), step,
-            {"lspi_iterations": float(self.lspi.iterations), "policy_success": self._sweep.rewarded / n,
-             "mean_trace_length": float(np.mean([len(t) for t in traces]))}, iteration=self.lspi.iterations))
+        self.emit(
+            EmbeddingOutput(
+                Trigger.POLICY_ITERATION,
+                tuple(range(n)),
+                mds.coordinates,
+                tuple(float(e) for e in mds.eigenvalues[: min(10, n)]),
+                step,
+                {
+                    "lspi_iterations": float(self.lspi.iterations),
+                    "policy_success": self._sweep.rewarded / n,
+                    "mean_trace_length": float(np.mean([len(t) for t in traces])),
+                },
+                iteration=self.lspi.iterations,
+            )
+        )
 
     def state(self) -> dict[str, Any]:
-        return {**super().state(), "lspi": self.lspi.state(), "practice": self.practice.state(), "phase": self.phase,
-                "sweep": self._sweep.state()}
+        return {
+            **super().state(),
+            "lspi": self.lspi.state(),
+            "practice": self.practice.state(),
+            "phase": self.phase,
+            "sweep": self._sweep.state(),
+        }
 
     def restore(self, state: dict[str, Any]) -> None:
         super().restore(state)

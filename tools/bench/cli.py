@@ -6,7 +6,11 @@ import argparse
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="benchmarks (loop, embedding, record, detectors, world)", description="Run a benchmark; see its --help.")
+    p = sub.add_parser(
+        "bench",
+        help="benchmarks (loop, embedding, record, detectors, world)",
+        description="Run a benchmark; see its --help.",
+    )
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     from sensorimotor.tools.bench import detectors, embedding, loop, record, world
 

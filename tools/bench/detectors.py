@@ -61,9 +61,17 @@ def synthetic(seeds: int = 100, pre: int = 20000, post: int = 2000, drop: float 
             fa, d = score_stream(make, x, pre)
             fas += fa
             delays.append(np.inf if d is None else d)
-        rows.append({"bench": "detectors", "streams": "synthetic", "detector": name, "seeds": seeds,
-                     "median_delay": float(np.median(delays)), "missed": int(np.isinf(delays).sum()),
-                     "false_alarms_per_10k": round(fas / (seeds * pre / 10_000), 3)})
+        rows.append(
+            {
+                "bench": "detectors",
+                "streams": "synthetic",
+                "detector": name,
+                "seeds": seeds,
+                "median_delay": float(np.median(delays)),
+                "missed": int(np.isinf(delays).sum()),
+                "false_alarms_per_10k": round(fas / (seeds * pre / 10_000), 3),
+            }
+        )
     return rows
 
 
@@ -74,8 +82,9 @@ def retina_streams(seeds: int, steps: int) -> list[tuple[str, np.ndarray, int]]:
     for s in range(seeds):
         for kind, at in (("lesion", steps // 3), ("reverse", steps // 2)):
             params = {"u": 4, "v": 4, "radius": 5} if kind == "lesion" else None
-            r = R.perturbation(s, kind, at=at, steps=steps, detector=None, supersample=1, params=params,
-                               embed_every=10**9)
+            r = R.perturbation(
+                s, kind, at=at, steps=steps, detector=None, supersample=1, params=params, embed_every=10**9
+            )
             # the signal the agent's detector watches: the retina program's performance, log(1 + activation)
             out.append((f"{kind} seed {s}", np.log1p(np.asarray(r.rewards)), at))
     return out
@@ -90,15 +99,21 @@ def on_streams(streams: list[tuple[str, np.ndarray, int]]) -> list[dict]:
             fas += fa
             pre_total += at
             delays.append(np.inf if d is None else d)
-        rows.append({"bench": "detectors", "streams": "retina lesion+reversal", "detector": name,
-                     "runs": len(streams), "delays": [None if np.isinf(d) else int(d) for d in delays],
-                     "false_alarms_per_10k": round(fas / (pre_total / 10_000), 3)})
+        rows.append(
+            {
+                "bench": "detectors",
+                "streams": "retina lesion+reversal",
+                "detector": name,
+                "runs": len(streams),
+                "delays": [None if np.isinf(d) else int(d) for d in delays],
+                "false_alarms_per_10k": round(fas / (pre_total / 10_000), 3),
+            }
+        )
     return rows
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("detectors", help="reward-drop detectors: delay and false alarms",
-                       description=__doc__)
+    p = sub.add_parser("detectors", help="reward-drop detectors: delay and false alarms", description=__doc__)
     p.add_argument("--seeds", type=int, default=100, help="synthetic streams (default 100)")
     p.add_argument("--retina-seeds", type=int, default=2, help="retina runs per perturbation (default 2; 0 skips)")
     p.add_argument("--retina-steps", type=int, default=6000, help="saccades per retina run (default 6000)")
@@ -114,11 +129,15 @@ def main_args(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(r))
         elif r["streams"] == "synthetic":
-            print(f"{r['streams']:<24} {r['detector']:<24} median delay {r['median_delay']:>6} steps  missed "
-                  f"{r['missed']:>3}  false alarms/10k {r['false_alarms_per_10k']}")
+            print(
+                f"{r['streams']:<24} {r['detector']:<24} median delay {r['median_delay']:>6} steps  missed "
+                f"{r['missed']:>3}  false alarms/10k {r['false_alarms_per_10k']}"
+            )
         else:
-            print(f"{r['streams']:<24} {r['detector']:<24} delays {r['delays']}  false alarms/10k "
-                  f"{r['false_alarms_per_10k']}")
+            print(
+                f"{r['streams']:<24} {r['detector']:<24} delays {r['delays']}  false alarms/10k "
+                f"{r['false_alarms_per_10k']}"
+            )
     ok = next(r for r in rows if r["detector"] == DEFAULT_DETECTOR and r["streams"] == "synthetic")
     meets = ok["median_delay"] <= 10 and ok["false_alarms_per_10k"] <= 0.3
     msg = f"default detector {DEFAULT_DETECTOR}: {'meets' if meets else 'does NOT meet'} median delay <= 10 at <= 0.3 false alarms/10k"

@@ -44,7 +44,9 @@ def continuous_traces(n: int, L: int = 100, seed: int = 0) -> tuple[list[np.ndar
 
 def discrete_traces(n: int, radius: int = 50, seed: int = 0) -> tuple[list[list[int]], np.ndarray]:
     rng = np.random.default_rng(seed)
-    cells = [(x, y) for x in range(-radius, radius + 1) for y in range(-radius, radius + 1) if abs(x) + abs(y) <= radius]
+    cells = [
+        (x, y) for x in range(-radius, radius + 1) for y in range(-radius, radius + 1) if abs(x) + abs(y) <= radius
+    ]
     pick = rng.choice(len(cells), size=min(n, len(cells)), replace=False)
     P = np.array([cells[i] for i in pick], dtype=np.float64)
     traces = [[3 if x < 0 else 2] * int(abs(x)) + [0 if y < 0 else 1] * int(abs(y)) for x, y in P]
@@ -64,8 +66,16 @@ def measure(fn: Callable[[], Any]) -> tuple[Any, float, float]:
 
 
 def row(method: str, kind: str, n: int, sec: float, mb: float, err: float | None, **extra: Any) -> dict:
-    return {"bench": "embedding", "method": method, "kind": kind, "n": n, "seconds": round(sec, 4),
-            "peak_mb": round(mb, 1), "procrustes_error": None if err is None else round(float(err), 6), **extra}
+    return {
+        "bench": "embedding",
+        "method": method,
+        "kind": kind,
+        "n": n,
+        "seconds": round(sec, 4),
+        "peak_mb": round(mb, 1),
+        "procrustes_error": None if err is None else round(float(err), 6),
+        **extra,
+    }
 
 
 def run(sizes: list[int], landmark_n: int, smacof_max: int, exact_landmark: bool, kinds: list[str]) -> list[dict]:
@@ -84,25 +94,73 @@ def run(sizes: list[int], landmark_n: int, smacof_max: int, exact_landmark: bool
                 return classical_mds(D, 2, method="topk", overwrite=True)
 
             res, sec, mb = measure(ours_all)
-            rows.append(row("ours: traces -> coordinates (float32, top-k)", kind, n, sec, mb,
-                            procrustes_error(P, res.coordinates)))
+            rows.append(
+                row(
+                    "ours: traces -> coordinates (float32, top-k)",
+                    kind,
+                    n,
+                    sec,
+                    mb,
+                    procrustes_error(P, res.coordinates),
+                )
+            )
             D, dsec, dmb = measure(lambda: trace_distances(traces, dtype=np.float32, **opts))
             rows.append(row("ours: trace distances only", kind, n, dsec, dmb, None))
             D64 = D.astype(np.float64)
             res, msec, mmb = measure(lambda: classical_mds(D.copy(), 2, method="topk", overwrite=True))
-            rows.append(row("ours: classical MDS from distances (top-k)", kind, n, msec, mmb,
-                            procrustes_error(P, res.coordinates)))
+            rows.append(
+                row(
+                    "ours: classical MDS from distances (top-k)",
+                    kind,
+                    n,
+                    msec,
+                    mmb,
+                    procrustes_error(P, res.coordinates),
+                )
+            )
             sk, ssec, smb = measure(lambda: ClassicalMDS(n_components=2, metric="precomputed").fit_transform(D64))
-            rows.append(row("sklearn ClassicalMDS from distances", kind, n, ssec, smb, procrustes_error(P, sk),
-                            ratio_vs_ours=round(ssec / msec, 1)))
-            iso, isec, imb = measure(lambda: Isomap(n_components=2, n_neighbors=10, metric="precomputed").fit_transform(D64))
-            rows.append(row("sklearn Isomap from distances", kind, n, isec, imb, procrustes_error(P, iso),
-                            ratio_vs_ours=round(isec / msec, 1)))
+            rows.append(
+                row(
+                    "sklearn ClassicalMDS from distances",
+                    kind,
+                    n,
+                    ssec,
+                    smb,
+                    procrustes_error(P, sk),
+                    ratio_vs_ours=round(ssec / msec, 1),
+                )
+            )
+            iso, isec, imb = measure(
+                lambda: Isomap(n_components=2, n_neighbors=10, metric="precomputed").fit_transform(D64)
+            )
+            rows.append(
+                row(
+                    "sklearn Isomap from distances",
+                    kind,
+                    n,
+                    isec,
+                    imb,
+                    procrustes_error(P, iso),
+                    ratio_vs_ours=round(isec / msec, 1),
+                )
+            )
             if n <= smacof_max:
-                sm, msec2, mmb2 = measure(lambda: MDS(n_components=2, metric="precomputed", n_init=1, init="random",
-                                                      random_state=0, max_iter=300).fit_transform(D64))
-                rows.append(row("sklearn MDS (SMACOF) from distances", kind, n, msec2, mmb2, procrustes_error(P, sm),
-                                ratio_vs_ours=round(msec2 / msec, 1)))
+                sm, msec2, mmb2 = measure(
+                    lambda: MDS(
+                        n_components=2, metric="precomputed", n_init=1, init="random", random_state=0, max_iter=300
+                    ).fit_transform(D64)
+                )
+                rows.append(
+                    row(
+                        "sklearn MDS (SMACOF) from distances",
+                        kind,
+                        n,
+                        msec2,
+                        mmb2,
+                        procrustes_error(P, sm),
+                        ratio_vs_ours=round(msec2 / msec, 1),
+                    )
+                )
             D = D64 = None  # free the n x n matrices before the next size
         if landmark_n and kind == "continuous":
             traces, P = continuous_traces(landmark_n, seed=1)
@@ -113,20 +171,36 @@ def run(sizes: list[int], landmark_n: int, smacof_max: int, exact_landmark: bool
                 exact = classical_mds(D, 2, method="topk", overwrite=True).coordinates
                 del D
                 extra["disparity_vs_exact"] = round(procrustes_error(exact, res.coordinates), 6)
-            rows.append(row("ours: landmark MDS, traces -> coordinates", kind, landmark_n, sec, mb,
-                            procrustes_error(P, res.coordinates), **extra))
+            rows.append(
+                row(
+                    "ours: landmark MDS, traces -> coordinates",
+                    kind,
+                    landmark_n,
+                    sec,
+                    mb,
+                    procrustes_error(P, res.coordinates),
+                    **extra,
+                )
+            )
     return rows
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("embedding", help="trace distances + MDS vs scikit-learn", description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "embedding",
+        help="trace distances + MDS vs scikit-learn",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--quick", action="store_true", help="a smoke run: n = 300, 1000; landmarks at 5000")
     p.add_argument("--sizes", default="1000,2000,5000", help="exact sizes (default 1000,2000,5000)")
     p.add_argument("--landmark-n", type=int, default=20000, help="landmark MDS size (default 20000; 0 skips)")
     p.add_argument("--smacof-max", type=int, default=2000, help="largest n given to SMACOF (slow)")
-    p.add_argument("--no-exact-landmark", action="store_true",
-                   help="skip the exact embedding of the landmark set (its disparity check costs ~1.6 GB at 20k)")
+    p.add_argument(
+        "--no-exact-landmark",
+        action="store_true",
+        help="skip the exact embedding of the landmark set (its disparity check costs ~1.6 GB at 20k)",
+    )
     p.add_argument("--kinds", default="continuous,discrete", help="continuous, discrete or both")
     p.add_argument("--json", action="store_true", help="one JSON object per line")
     p.set_defaults(func=main_args)
@@ -135,14 +209,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def main_args(args: argparse.Namespace) -> int:
     sizes = [300, 1000] if args.quick else [int(s) for s in args.sizes.split(",") if s]
     landmark_n = 5000 if args.quick and args.landmark_n == 20000 else args.landmark_n
-    rows = run(sizes, landmark_n, min(args.smacof_max, 1000) if args.quick else args.smacof_max,
-               not args.no_exact_landmark, [k.strip() for k in args.kinds.split(",")])
+    rows = run(
+        sizes,
+        landmark_n,
+        min(args.smacof_max, 1000) if args.quick else args.smacof_max,
+        not args.no_exact_landmark,
+        [k.strip() for k in args.kinds.split(",")],
+    )
     for r in rows:
         if args.json:
             print(json.dumps(r), flush=True)
         else:
             extra = "".join(f"  {k}={r[k]}" for k in ("ratio_vs_ours", "disparity_vs_exact", "landmarks") if k in r)
             err = "-" if r["procrustes_error"] is None else f"{r['procrustes_error']:.4f}"
-            print(f"{r['kind']:<10} n={r['n']:<6} {r['method']:<46} {r['seconds']:>8.3f} s {r['peak_mb']:>8.1f} MB  "
-                  f"procrustes {err}{extra}", flush=True)
+            print(
+                f"{r['kind']:<10} n={r['n']:<6} {r['method']:<46} {r['seconds']:>8.3f} s {r['peak_mb']:>8.1f} MB  "
+                f"procrustes {err}{extra}",
+                flush=True,
+            )
     return 0

@@ -27,10 +27,13 @@ from sensorimotor.worlds.bench import BenchWorld
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("loop", help="lockstep loop over zenoh vs in-process",
-                       description="Measure lockstep steps/s and round-trip latency (p50/p99) between a world "
-                       "process and the agent daemon over zenoh on loopback (free port, no multicast), and "
-                       "the same loop in-process; print both and their ratio.")
+    p = sub.add_parser(
+        "loop",
+        help="lockstep loop over zenoh vs in-process",
+        description="Measure lockstep steps/s and round-trip latency (p50/p99) between a world "
+        "process and the agent daemon over zenoh on loopback (free port, no multicast), and "
+        "the same loop in-process; print both and their ratio.",
+    )
     p.add_argument("--steps", type=int, default=20000, help="lockstep steps per measurement (default 20000)")
     p.add_argument("--obs-bytes", type=int, default=16384, help="observation size in bytes (default 16 KB)")
     p.add_argument("--json", action="store_true", help="one JSON object per line")
@@ -53,9 +56,16 @@ def inprocess(steps: int, obs_bytes: int) -> dict:
             res, t = world.step(np.asarray(dec.values)), t + 1
         lat[k] = time.perf_counter() - s
     sec = time.perf_counter() - t0
-    return {"bench": "loop", "mode": "inprocess", "steps": steps, "obs_bytes": obs_bytes, "seconds": round(sec, 4),
-            "steps_per_s": round(steps / sec, 1), "p50_ms": round(float(np.percentile(lat, 50)) * 1e3, 4),
-            "p99_ms": round(float(np.percentile(lat, 99)) * 1e3, 4)}
+    return {
+        "bench": "loop",
+        "mode": "inprocess",
+        "steps": steps,
+        "obs_bytes": obs_bytes,
+        "seconds": round(sec, 4),
+        "steps_per_s": round(steps / sec, 1),
+        "p50_ms": round(float(np.percentile(lat, 50)) * 1e3, 4),
+        "p99_ms": round(float(np.percentile(lat, 99)) * 1e3, 4),
+    }
 
 
 def over_zenoh(steps: int, obs_bytes: int, timeout: float = 300.0, world_args: tuple[str, ...] = ()) -> dict:
@@ -66,8 +76,25 @@ def over_zenoh(steps: int, obs_bytes: int, timeout: float = 300.0, world_args: t
         th = threading.Thread(target=daemon.run, daemon=True)
         th.start()
         stats_file = os.path.join(tmp, "stats.json")
-        cmd = [sys.executable, "-m", "sensorimotor.tools.cli", "world", "bench", "--id", "bench", "--steps", str(steps),
-               "--param", f"obs_bytes={obs_bytes}", "--stats-json", stats_file, "--connect", ep, "-q", *world_args]
+        cmd = [
+            sys.executable,
+            "-m",
+            "sensorimotor.tools.cli",
+            "world",
+            "bench",
+            "--id",
+            "bench",
+            "--steps",
+            str(steps),
+            "--param",
+            f"obs_bytes={obs_bytes}",
+            "--stats-json",
+            stats_file,
+            "--connect",
+            ep,
+            "-q",
+            *world_args,
+        ]
         proc = subprocess.Popen(cmd, cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
         try:
             proc.wait(timeout=timeout)
@@ -82,27 +109,45 @@ def over_zenoh(steps: int, obs_bytes: int, timeout: float = 300.0, world_args: t
             raise RuntimeError(f"world process failed (exit {proc.returncode})")
         with open(stats_file) as f:
             st = json.load(f)
-    return {"bench": "loop", "mode": "zenoh", "steps": st["steps"], "obs_bytes": obs_bytes,
-            "seconds": st["seconds"], "steps_per_s": st.get("steady_steps_per_s", st["steps_per_s"]),
-            "steps_per_s_including_attach": st["steps_per_s"], "p50_ms": st.get("p50_ms"),
-            "p99_ms": st.get("p99_ms"), "resends": st["resends"]}
+    return {
+        "bench": "loop",
+        "mode": "zenoh",
+        "steps": st["steps"],
+        "obs_bytes": obs_bytes,
+        "seconds": st["seconds"],
+        "steps_per_s": st.get("steady_steps_per_s", st["steps_per_s"]),
+        "steps_per_s_including_attach": st["steps_per_s"],
+        "p50_ms": st.get("p50_ms"),
+        "p99_ms": st.get("p99_ms"),
+        "resends": st["resends"],
+    }
 
 
 def main_args(args: argparse.Namespace) -> int:
     a = inprocess(args.steps, args.obs_bytes)
     b = over_zenoh(args.steps, args.obs_bytes)
-    ratio = {"bench": "loop", "mode": "ratio", "inprocess_over_zenoh_steps_per_s": round(a["steps_per_s"] / b["steps_per_s"], 2),
-             "zenoh_steps_per_s": b["steps_per_s"], "zenoh_p99_ms": b["p99_ms"],
-             "target_steps_per_s": 2000, "target_p99_ms": 2.0,
-             "meets_target": bool(b["steps_per_s"] >= 2000 and (b["p99_ms"] or 1e9) <= 2.0)}
+    ratio = {
+        "bench": "loop",
+        "mode": "ratio",
+        "inprocess_over_zenoh_steps_per_s": round(a["steps_per_s"] / b["steps_per_s"], 2),
+        "zenoh_steps_per_s": b["steps_per_s"],
+        "zenoh_p99_ms": b["p99_ms"],
+        "target_steps_per_s": 2000,
+        "target_p99_ms": 2.0,
+        "meets_target": bool(b["steps_per_s"] >= 2000 and (b["p99_ms"] or 1e9) <= 2.0),
+    }
     rows = [a, b, ratio]
     if args.json:
         for r in rows:
             print(json.dumps(r))
     else:
         for r in (a, b):
-            print(f"{r['mode']:<10} {r['steps']:>7} steps  {r['steps_per_s']:>10,.0f} steps/s  "
-                  f"p50 {r['p50_ms']:.3f} ms  p99 {r['p99_ms']:.3f} ms")
-        print(f"in-process is {ratio['inprocess_over_zenoh_steps_per_s']}x the zenoh loop; target >= 2000 steps/s "
-              f"and p99 <= 2 ms over zenoh: {'met' if ratio['meets_target'] else 'NOT met'}")
+            print(
+                f"{r['mode']:<10} {r['steps']:>7} steps  {r['steps_per_s']:>10,.0f} steps/s  "
+                f"p50 {r['p50_ms']:.3f} ms  p99 {r['p99_ms']:.3f} ms"
+            )
+        print(
+            f"in-process is {ratio['inprocess_over_zenoh_steps_per_s']}x the zenoh loop; target >= 2000 steps/s "
+            f"and p99 <= 2 ms over zenoh: {'met' if ratio['meets_target'] else 'NOT met'}"
+        )
     return 0

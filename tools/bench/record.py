@@ -33,8 +33,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(steps: int, obs_bytes: int, timeout: float = 600.0) -> dict:
     ep = f"tcp/127.0.0.1:{free_port()}"
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    with tempfile.TemporaryDirectory() as tmp, Bus(BusConfig.for_role("agent", ep)) as abus, \
-            Bus(BusConfig.for_role("world", ep)) as rbus:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        Bus(BusConfig.for_role("agent", ep)) as abus,
+        Bus(BusConfig.for_role("world", ep)) as rbus,
+    ):
         daemon = AgentDaemon(abus, "bench")
         daemon.start()
         th = threading.Thread(target=daemon.run, daemon=True)
@@ -47,9 +50,29 @@ def run(steps: int, obs_bytes: int, timeout: float = 600.0) -> dict:
         for i in (1, 2):
             f = os.path.join(tmp, f"w{i}.json")
             stats.append(f)
-            procs.append(subprocess.Popen(
-                [sys.executable, "-m", "sensorimotor.tools.cli", "world", "bench", "--id", f"w{i}", "--steps", str(steps),
-                 "--param", f"obs_bytes={obs_bytes}", "--stats-json", f, "--connect", ep, "-q"], cwd=root))
+            procs.append(
+                subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        "sensorimotor.tools.cli",
+                        "world",
+                        "bench",
+                        "--id",
+                        f"w{i}",
+                        "--steps",
+                        str(steps),
+                        "--param",
+                        f"obs_bytes={obs_bytes}",
+                        "--stats-json",
+                        f,
+                        "--connect",
+                        ep,
+                        "-q",
+                    ],
+                    cwd=root,
+                )
+            )
         try:
             for p in procs:
                 p.wait(timeout)
@@ -71,16 +94,29 @@ def run(steps: int, obs_bytes: int, timeout: float = 600.0) -> dict:
             with open(f) as fh:
                 st = json.load(fh)
             wid = f"w{i}"
-            worlds[wid] = {"obs_published": st["published"], "obs_written": counts[keys.world_obs(wid)],
-                           "actions_published": answered.get(wid, 0), "actions_written": counts[keys.world_act(wid)],
-                           "steps": st["steps"]}
+            worlds[wid] = {
+                "obs_published": st["published"],
+                "obs_written": counts[keys.world_obs(wid)],
+                "actions_published": answered.get(wid, 0),
+                "actions_written": counts[keys.world_act(wid)],
+                "steps": st["steps"],
+            }
     total_pub = sum(w["obs_published"] + w["actions_published"] for w in worlds.values())
     total_written = sum(w["obs_written"] + w["actions_written"] for w in worlds.values())
-    return {"bench": "record", "worlds": worlds, "seconds": round(seconds, 2),
-            "messages_per_s": round(total_written / seconds, 1), "mb_per_s": round(size / seconds / 1e6, 2),
-            "file_mb": round(size / 1e6, 2), "published": total_pub, "written": total_written,
-            "all_written": all(w["obs_published"] == w["obs_written"] and w["actions_published"] == w["actions_written"]
-                               for w in worlds.values())}
+    return {
+        "bench": "record",
+        "worlds": worlds,
+        "seconds": round(seconds, 2),
+        "messages_per_s": round(total_written / seconds, 1),
+        "mb_per_s": round(size / seconds / 1e6, 2),
+        "file_mb": round(size / 1e6, 2),
+        "published": total_pub,
+        "written": total_written,
+        "all_written": all(
+            w["obs_published"] == w["obs_written"] and w["actions_published"] == w["actions_written"]
+            for w in worlds.values()
+        ),
+    }
 
 
 def main_args(args: argparse.Namespace) -> int:
@@ -89,8 +125,12 @@ def main_args(args: argparse.Namespace) -> int:
         print(json.dumps(r))
     else:
         for wid, w in r["worlds"].items():
-            print(f"{wid}: observations published {w['obs_published']}, written {w['obs_written']}; "
-                  f"actions published {w['actions_published']}, written {w['actions_written']}")
-        print(f"{r['written']} of {r['published']} messages written in {r['seconds']} s "
-              f"({r['messages_per_s']:,.0f} msg/s, {r['mb_per_s']} MB/s compressed); all written: {r['all_written']}")
+            print(
+                f"{wid}: observations published {w['obs_published']}, written {w['obs_written']}; "
+                f"actions published {w['actions_published']}, written {w['actions_written']}"
+            )
+        print(
+            f"{r['written']} of {r['published']} messages written in {r['seconds']} s "
+            f"({r['messages_per_s']:,.0f} msg/s, {r['mb_per_s']} MB/s compressed); all written: {r['all_written']}"
+        )
     return 0 if r["all_written"] else 1

@@ -35,8 +35,14 @@ def measure(name: str, steps: int, params: dict[str, str]) -> dict:
             else:
                 res = w.step(rng.uniform(spec.action_space.low, spec.action_space.high))
         sec = time.perf_counter() - t0
-    return {"bench": "world", "world": name, "params": params, "steps": steps, "seconds": round(sec, 3),
-            "steps_per_s": round(steps / sec, 1)}
+    return {
+        "bench": "world",
+        "world": name,
+        "params": params,
+        "steps": steps,
+        "seconds": round(sec, 3),
+        "steps_per_s": round(steps / sec, 1),
+    }
 
 
 def raw_frame(px: int = 128, frames: int = 200) -> dict:
@@ -55,8 +61,13 @@ def raw_frame(px: int = 128, frames: int = 200) -> dict:
         sec = time.perf_counter() - t0
     finally:
         c.disconnect()
-    return {"bench": "world", "world": f"raw TinyRenderer {px}x{px} frame", "steps": frames,
-            "seconds": round(sec, 3), "steps_per_s": round(frames / sec, 1)}
+    return {
+        "bench": "world",
+        "world": f"raw TinyRenderer {px}x{px} frame",
+        "steps": frames,
+        "seconds": round(sec, 3),
+        "steps_per_s": round(frames / sec, 1),
+    }
 
 
 def main_args(args: argparse.Namespace) -> int:
@@ -64,7 +75,9 @@ def main_args(args: argparse.Namespace) -> int:
 
     base = raw_frame()
     rows = [base]
-    variants = [parse_params(args.param)] if args.param else ([{}, {"supersample": "1"}] if args.world == "retina" else [{}])
+    variants = (
+        [parse_params(args.param)] if args.param else ([{}, {"supersample": "1"}] if args.world == "retina" else [{}])
+    )
     for params in variants:
         r = measure(args.world, args.steps, params)
         r["ratio_to_raw_frame"] = round(r["steps_per_s"] / base["steps_per_s"], 3)

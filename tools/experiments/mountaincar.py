@@ -16,17 +16,26 @@ from sensorimotor.worlds.mountaincar_dynamics import step as car_step
 
 @dataclass
 class DriveResult:
-    curve: list[tuple[int, float]]                 # (training car steps, mean steps to goal)
+    curve: list[tuple[int, float]]  # (training car steps, mean steps to goal)
     embeddings: list[dict[str, Any]] = field(default_factory=list)
     drops: list[int] = field(default_factory=list)  # training steps at which the agent saw a drop
-    morph_at: int | None = None                     # training steps when the body changed
+    morph_at: int | None = None  # training steps when the body changed
     world_steps: int = 0
     seconds: float = 0.0
 
 
-def visual(seed: int, train_steps: int, eval_every: int = 10_000, n_eval: int = 100, baseline: float = 1.0,
-           vertical: bool = False, morph_at: int | None = None, morph: dict[str, str] | None = None,
-           detector: str | None = None, **program_params: Any) -> DriveResult:
+def visual(
+    seed: int,
+    train_steps: int,
+    eval_every: int = 10_000,
+    n_eval: int = 100,
+    baseline: float = 1.0,
+    vertical: bool = False,
+    morph_at: int | None = None,
+    morph: dict[str, str] | None = None,
+    detector: str | None = None,
+    **program_params: Any,
+) -> DriveResult:
     """The staged program on the rendered robot; optionally the body changes (`morph`) after
     `morph_at` training car steps, with the agent's own detector watching (`detector`)."""
     from sensorimotor.agent.detectors import make_detector
@@ -42,8 +51,14 @@ def visual(seed: int, train_steps: int, eval_every: int = 10_000, n_eval: int = 
 
     def on_output(msg: Any) -> None:
         if isinstance(msg, Embedding):
-            res.embeddings.append({"version": msg.version, "trigger": msg.trigger, "training_steps": prog.training_steps,
-                                   "procrustes_error": msg.procrustes_error})
+            res.embeddings.append(
+                {
+                    "version": msg.version,
+                    "trigger": msg.trigger,
+                    "training_steps": prog.training_steps,
+                    "procrustes_error": msg.procrustes_error,
+                }
+            )
         elif getattr(msg, "kind", None) == "drop_detected":
             res.drops.append(prog.training_steps)
 
@@ -57,15 +72,31 @@ def visual(seed: int, train_steps: int, eval_every: int = 10_000, n_eval: int = 
     n_evals = train_steps // eval_every
     det = make_detector(detector, **prog.detector_params) if detector else None
     with world:
-        run = run_inprocess(world, prog, 10**9, detector=det, on_output=on_output, perturb=perturb,
-                            stop_when=lambda r: len(prog.curve) >= n_evals)
+        run = run_inprocess(
+            world,
+            prog,
+            10**9,
+            detector=det,
+            on_output=on_output,
+            perturb=perturb,
+            stop_when=lambda r: len(prog.curve) >= n_evals,
+        )
     res.curve, res.world_steps, res.seconds = list(prog.curve), run.steps, run.seconds
     return res
 
 
-def true_state(seed: int, train_steps: int, eval_every: int = 10_000, n_eval: int = 100, tiles: int = 10,
-               n_tilings: int = 8, alpha: float = 0.3, gamma: float = 0.99, lam: float = 0.9,
-               max_car_steps: int = 1000) -> DriveResult:
+def true_state(
+    seed: int,
+    train_steps: int,
+    eval_every: int = 10_000,
+    n_eval: int = 100,
+    tiles: int = 10,
+    n_tilings: int = 8,
+    alpha: float = 0.3,
+    gamma: float = 0.99,
+    lam: float = 0.9,
+    max_car_steps: int = 1000,
+) -> DriveResult:
     """The same Sarsa(lambda) and tile coding, given the true position and velocity."""
     prm = MountainCarParams()
     rng = np.random.default_rng(seed)

@@ -25,8 +25,8 @@ EVAL_SEED = 999
 
 @dataclass(frozen=True)
 class Evaluation:
-    one: float         # px from the centre after one greedy saccade (mean over repositions)
-    two: float         # ... after two
+    one: float  # px from the centre after one greedy saccade (mean over repositions)
+    two: float  # ... after two
     activation: float  # post-saccade activation (reward) of the first greedy saccade
 
 
@@ -48,7 +48,9 @@ def evaluate(world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int 
     return Evaluation(float(np.mean(one)), float(np.mean(two)), float(np.mean(act)))
 
 
-def saccade_errors(world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int = EVAL_SEED) -> tuple[float, float]:
+def saccade_errors(
+    world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int = EVAL_SEED
+) -> tuple[float, float]:
     e = evaluate(world, program, n, seed)
     return e.one, e.two
 
@@ -91,8 +93,15 @@ def _evaluator(world: RetinaWorld, program: RetinaProgram, curve: Curve, every: 
     return on_step
 
 
-def learning(seed: int, steps: int = 5000, every: int = 500, rule: str = "robust", supersample: int = 2,
-             n_eval: int = 30, exploration: str = "relearn") -> Curve:
+def learning(
+    seed: int,
+    steps: int = 5000,
+    every: int = 500,
+    rule: str = "robust",
+    supersample: int = 2,
+    n_eval: int = 30,
+    exploration: str = "relearn",
+) -> Curve:
     """Greedy evaluation every `every` training saccades; `steps` counts training saccades
     (episodes), as in the dissertation."""
     world, program = make(seed, rule, supersample, embed_every=10**9, exploration=exploration)
@@ -112,18 +121,29 @@ def moving_average(x: list[float] | np.ndarray, w: int) -> np.ndarray:
 
 @dataclass
 class PerturbationRun:
-    rewards: list[float]          # post-saccade reward per episode
-    at: int                       # episode of the perturbation
+    rewards: list[float]  # post-saccade reward per episode
+    at: int  # episode of the perturbation
     run: InProcessRun
-    drop_episodes: list[int]      # episodes at which the link's detector fired
+    drop_episodes: list[int]  # episodes at which the link's detector fired
     world: RetinaWorld
     program: RetinaProgram
     curve: Curve
 
 
-def perturbation(seed: int, kind: str, at: int, steps: int, rule: str = "robust", detector: str | None = "cusum",
-                 supersample: int = 2, params: dict | None = None, embed_every: int = 1000,
-                 exploration: str = "relearn", every: int | None = None, n_eval: int = 30) -> PerturbationRun:
+def perturbation(
+    seed: int,
+    kind: str,
+    at: int,
+    steps: int,
+    rule: str = "robust",
+    detector: str | None = "cusum",
+    supersample: int = 2,
+    params: dict | None = None,
+    embed_every: int = 1000,
+    exploration: str = "relearn",
+    every: int | None = None,
+    n_eval: int = 30,
+) -> PerturbationRun:
     """Train for `steps` saccades, perturb right after saccade `at`. With `every`, greedy
     evaluations (Curve) are made every `every` saccades."""
     world, program = make(seed, rule, supersample, embed_every=embed_every, exploration=exploration)
@@ -152,15 +172,16 @@ def perturbation(seed: int, kind: str, at: int, steps: int, rule: str = "robust"
 
     det = make_detector(detector) if detector else None
     with world:
-        run = run_inprocess(world, program, 2 * steps + 1, detector=det, on_step=on_step, on_output=on_output,
-                            perturb=perturb)
+        run = run_inprocess(
+            world, program, 2 * steps + 1, detector=det, on_step=on_step, on_output=on_output, perturb=perturb
+        )
     return PerturbationRun(rewards, at, run, drops, world, program, curve)
 
 
 def relearn_episodes(rewards: list[float], at: int, frac: float = 0.9, pre: int = 500, window: int = 200) -> int | None:
     """Episodes after `at` until the `window` moving average of the reward is back to `frac` of its
     mean over the `pre` episodes before `at` (None if it never is)."""
-    base = float(np.mean(rewards[max(0, at - pre):at]))
+    base = float(np.mean(rewards[max(0, at - pre) : at]))
     ma = moving_average(rewards[at:], window)
     hit = np.flatnonzero(ma >= frac * base)
     return int(hit[0] + window) if hit.size else None
