@@ -15,7 +15,7 @@ from typing import Any
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DropDetector, make_detector
 from sensorimotor.agent.link import Publish, WorldLink
 from sensorimotor.agent.programs.base import Program
-from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.agent.programs.registry import PROGRAMS, make_program, resolve_program
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.messages import AttachConfig, EventKind, Truth, WorldSpec
 from sensorimotor.protocol.params import format_value
@@ -61,8 +61,8 @@ class AgentConfig:
 
 
 def program_name(spec: WorldSpec) -> str:
-    """The program a world asks for: its hint, else its kind."""
-    return spec.program or spec.kind
+    """The program that runs a world (the generic one when the agent lacks the one it asks for)."""
+    return resolve_program(spec)
 
 
 @dataclass(frozen=True)
@@ -123,6 +123,13 @@ def attach(
     link = WorldLink(config.agent_id, spec, program, publish, detector)
     link.truth = truth
     link.version = version
+    asked = spec.program or spec.kind
+    if program.name != asked and asked not in PROGRAMS:
+        link.event(
+            EventKind.PROGRAM_FALLBACK,
+            f"this agent has no program {asked!r}; the {program.name} program learns the world instead",
+            reason=asked,
+        )
     link.event(
         EventKind.ATTACHED,
         f"{spec.kind} with program {program.name} ({how}"

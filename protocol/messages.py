@@ -22,6 +22,7 @@ class EventKind(StrEnum):
     RELEARNING = "relearning"
     RELEARNED = "relearned"
     PROGRAM_ERROR = "program_error"  # `reason`: the exception's type name
+    PROGRAM_FALLBACK = "program_fallback"  # the world asked for a program the agent lacks (`reason`)
     POLICY_ITERATION = "policy_iteration"
     EVALUATION = "evaluation"
     WORLD_EVENT = "world_event"  # a WorldEvent the agent saw, `reason` = its kind

@@ -6,7 +6,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from sensorimotor.agent.attach import AgentConfig, Restored, attach, same_body
 from sensorimotor.agent.link import WorldLink
@@ -156,7 +155,11 @@ def test_same_body_includes_the_program():
     assert not same_body(spec, replace(spec, program="echo"))
 
 
-def test_attach_refuses_an_unknown_program():
+def test_an_unknown_program_falls_back_to_the_generic_one_and_says_so():
+    out: list = []
     spec = replace(Picky("p").spec(), program="nosuch")
-    with pytest.raises(ValueError, match="nosuch"):
-        attach(spec, AgentConfig(), lambda ch, m: None)
+    att = attach(spec, AgentConfig(), lambda ch, m: out.append(m))
+    assert att.link.program.name == "generic"
+    fallback = [e for e in out if e.kind == EventKind.PROGRAM_FALLBACK]
+    assert len(fallback) == 1 and fallback[0].reason == "nosuch"
+    assert [e.config.program for e in out if e.kind == EventKind.ATTACHED] == ["generic"]

@@ -119,6 +119,12 @@ def vergence():
     return VergenceWorld(seed=0)
 
 
+def beacons():
+    from tests.test_generic_program import Beacons
+
+    return Beacons()
+
+
 def mountaincar():
     return MountainCarWorld(seed=0, n_eval=2, n_positions=8, max_car_steps=60)
 
@@ -127,6 +133,9 @@ def mountaincar():
 CASES = {
     "echo": (grid, "echo", {}, 300, 200, 0),
     "gridworld": (grid, None, {"samples_per_iteration": 200}, 1500, 1500, 1),
+    # the generic program on raw sensor vectors (PCA + RBF) and on state ids (tabular)
+    "generic": (beacons, None, {"samples_per_iteration": 150}, 1200, 1200, 1),
+    "generic-ids": (grid, "generic", {"samples_per_iteration": 200}, 1500, 1500, 1),
     "retina": (retina, None, {"embed_every": 200}, 700, 500, 1),
     "vergence": (vergence, None, {"samples_per_iteration": 100}, 1500, 1500, 1),
     # reaches the driving stage (Sarsa, Kalman filter) before the checkpoint; episodes end, are

@@ -139,8 +139,12 @@ class LSPI:
         tie-breaking gives consistent traces, which the embedding needs. The tolerance is relative
         because with goal rewards the gap between an optimal and a detour action is the fixed
         fraction 1 - gamma^2 of the value, while the ridge term perturbs exact ties slightly."""
-        q = self.q(s)
-        ties = np.flatnonzero(self._tied(q[None, :])[0])
+        return self.choose(self.q(s), prefer)
+
+    def choose(self, q: np.ndarray, prefer: int | None = None) -> int:
+        """The greedy action for action values `q`, near-ties broken as `greedy` does (for callers
+        that compute Q themselves, e.g. from features of an observation never stored)."""
+        ties = np.flatnonzero(self._tied(np.asarray(q, dtype=np.float64)[None, :])[0])
         if prefer is not None and prefer in ties:
             return int(prefer)
         return int(ties[0])

@@ -53,6 +53,12 @@ PROGRAMS: dict[str, ProgramKind] = {
         "MountainCarProgramParams",
         "vergence geometry, then Sarsa(lambda) driving on top of it (ch. 8)",
     ),
+    "generic": ProgramKind(
+        "generic",
+        "GenericProgram",
+        "GenericProgramParams",
+        "any world: PCA + RBF features (or state ids), LSPI, traces from start states (ch. 6)",
+    ),
     "echo": ProgramKind("base", "EchoProgram", "EchoParams", "answers every observation with action 0 (benchmarks)"),
 }
 
@@ -88,12 +94,17 @@ def check_program_params(params: Mapping[str, Mapping[str, Any]] | None) -> dict
     return out
 
 
-def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
-    """The program for `spec` (its `program` hint, else its kind), with hyperparameters `kw`
-    (strings or typed values, validated against the program's declaration)."""
+FALLBACK = "generic"
+
+
+def resolve_program(spec: WorldSpec) -> str:
+    """The program that runs a world: its `program` hint (else its kind) when the agent has that
+    program, else the generic program, which learns any world."""
     name = spec.program or spec.kind
-    if name not in PROGRAMS:
-        raise ValueError(
-            f"no developmental program {name!r} for world {spec.world_id!r}; known: {', '.join(sorted(PROGRAMS))}"
-        )
-    return PROGRAMS[name].program_class()(spec, seed, **kw)
+    return name if name in PROGRAMS else FALLBACK
+
+
+def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
+    """The program for `spec` (see `resolve_program`), with hyperparameters `kw` (strings or typed
+    values, validated against that program's declaration)."""
+    return PROGRAMS[resolve_program(spec)].program_class()(spec, seed, **kw)
