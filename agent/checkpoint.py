@@ -126,7 +126,9 @@ def encode_checkpoint(ckpt: Checkpoint) -> bytes:
     }
     text = json.dumps(meta, allow_nan=True, separators=(",", ":")).encode("utf-8")
     buf = io.BytesIO()
-    np.savez(buf, **{META_ENTRY: np.frombuffer(text, dtype=np.uint8)}, **arrays)
+    # numpy's stub types **kwds against `allow_pickle: bool` too; entry names here are dotted state
+    # paths and META_ENTRY, never "allow_pickle"
+    np.savez(buf, **{META_ENTRY: np.frombuffer(text, dtype=np.uint8)}, **arrays)  # type: ignore[arg-type]
     return buf.getvalue()
 
 

@@ -173,8 +173,9 @@ class AgentDaemon:
             raise last
         return None
 
-    def _checkpoint_path(self, wid: str) -> str | None:
-        return os.path.join(self.state_dir, f"{wid}.ckpt.npz") if self.state_dir else None
+    @staticmethod
+    def _checkpoint_path(state_dir: str, wid: str) -> str:
+        return os.path.join(state_dir, f"{wid}.ckpt.npz")
 
     def _load_checkpoint(self, spec: WorldSpec) -> Restored | None:
         """The saved link for this world, or None to start fresh: the program rebuilt from its
@@ -183,14 +184,17 @@ class AgentDaemon:
         as NAME.bad-<UTC time>, one learned on another body (kind, program, sensors, actions) as
         NAME.other-body-<UTC time>: its state cannot serve this world, and left in place it would
         be overwritten by the next checkpoint. Pickles (the old NAME.pkl) are never loaded."""
-        path = self._checkpoint_path(spec.world_id)
-        if path and os.path.exists(os.path.join(self.state_dir, f"{spec.world_id}.pkl")):
+        state_dir = self.state_dir
+        if not state_dir:
+            return None
+        path = self._checkpoint_path(state_dir, spec.world_id)
+        if os.path.exists(os.path.join(state_dir, f"{spec.world_id}.pkl")):
             log.warning(
                 "world %s: ignoring the old pickle checkpoint %s.pkl (pickles are never loaded)",
                 spec.world_id,
                 spec.world_id,
             )
-        if not path or not os.path.exists(path):
+        if not os.path.exists(path):
             return None
 
         def set_aside(why: str, reason: str) -> None:
@@ -238,10 +242,11 @@ class AgentDaemon:
 
     def checkpoint(self) -> None:
         """Write every link's learned state to STATE_DIR/<world>.ckpt.npz (atomically, no pickle)."""
-        if not self.state_dir:
+        state_dir = self.state_dir
+        if not state_dir:
             return
         for wid, link in list(self.links.items()):
-            path = self._checkpoint_path(wid)
+            path = self._checkpoint_path(state_dir, wid)
             with link.lock:  # a consistent snapshot (copies): the file is written while the link runs on
                 program, spec = link.program, link.spec
                 ckpt = Checkpoint(

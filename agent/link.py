@@ -220,9 +220,10 @@ class WorldLink:
             self.reject(e.kind, str(e), obs.step)
             return None
         except Exception as e:  # a program bug must not kill the link or lose what it learned
-            dec = self._program_failed(e, obs.step)
-            if dec is None:
+            fallback = self._program_failed(e, obs.step)
+            if fallback is None:
                 return None
+            dec = fallback
         act = Action(self.world_id, obs.step, tuple(float(v) for v in dec.values), dec.reset, dec.start, time.time())
         self._last_step, self._last_action = obs.step, act
         self.publish("act", act)
@@ -231,17 +232,18 @@ class WorldLink:
         if obs.t == 0:
             c.episodes += 1
         c.reward_mean += self.REWARD_EMA * (obs.reward - c.reward_mean)
-        perf = self.program.performance(obs) if self.detector is not None else None
-        if perf is not None:
-            ref = self.detector.reference
-            if self.detector.update(perf):
+        detector = self.detector
+        perf = self.program.performance(obs) if detector is not None else None
+        if detector is not None and perf is not None:
+            ref = detector.reference
+            if detector.update(perf):
                 c.drops += 1
                 self.event(
                     EventKind.DROP_DETECTED,
-                    f"{self.detector.name} saw the reward drop (now {perf:.4g}, reference {ref:.4g})",
+                    f"{detector.name} saw the reward drop (now {perf:.4g}, reference {ref:.4g})",
                     obs.step,
                     {"reward": perf, "reference": ref},
-                    reason=self.detector.name,
+                    reason=detector.name,
                 )
                 self.program.on_drop(obs.step)
         for item in self.program.drain():

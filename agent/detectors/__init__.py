@@ -7,7 +7,11 @@ from sensorimotor.agent.detectors.cusum import CUSUM
 from sensorimotor.agent.detectors.moving_average_drop import MovingAverageDrop
 from sensorimotor.agent.detectors.page_hinkley import PageHinkley
 
-DETECTORS = {"cusum": CUSUM, "moving_average": MovingAverageDrop, "page_hinkley": PageHinkley}
+DETECTORS: dict[str, type[DropDetector]] = {
+    "cusum": CUSUM,
+    "moving_average": MovingAverageDrop,
+    "page_hinkley": PageHinkley,
+}
 DEFAULT_DETECTOR = "cusum"
 
 
@@ -18,7 +22,7 @@ def make_detector(name: str = DEFAULT_DETECTOR, **params) -> DropDetector:
         cls = DETECTORS[name]
     except KeyError:
         raise ValueError(f"unknown detector {name!r}; known: {', '.join(sorted(DETECTORS))}") from None
-    accepted = inspect.signature(cls.__init__).parameters
+    accepted = inspect.signature(cls).parameters
     return cls(**{k: v for k, v in params.items() if k in accepted})
 
 

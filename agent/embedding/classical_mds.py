@@ -41,7 +41,7 @@ class MDSResult:
     coordinates: np.ndarray  # [n, k]
     eigenvalues: np.ndarray  # descending; the full spectrum for method "full", the top k otherwise
     method: str
-    model: MDSModel | None = None
+    model: MDSModel  # places new points from their distances to these ones
 
     @property
     def dims(self) -> int:

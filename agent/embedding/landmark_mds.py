@@ -48,7 +48,7 @@ def landmark_mds(
     n_landmarks: int = 300,
     seed: int = 0,
     select: str = "maxmin",
-    candidate_distances_to: Callable[[np.ndarray], tuple[np.ndarray, DistancesTo]] | None = None,
+    candidate_distances_to: Callable[[np.ndarray], DistancesTo] | None = None,
 ) -> LandmarkResult:
     """`candidate_distances_to(pool)` (optional) gives distances among a candidate pool cheaply;
     max-min selection then runs on a random pool of 10 m points instead of all n."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 from sensorimotor.agent.embedding import trace_kernels as K
 
@@ -85,7 +86,7 @@ def trace_distances(
     kind: str = "continuous",
     pad: str = "append",
     substitution_cost: int = 1,
-    dtype: type = np.float64,
+    dtype: DTypeLike = np.float64,
 ) -> np.ndarray:
     """The n x n matrix of pairwise trace distances (zero diagonal, symmetric)."""
     _check_kind(kind)
@@ -109,7 +110,7 @@ def trace_cross_distances(
     kind: str = "continuous",
     pad: str = "append",
     substitution_cost: int = 1,
-    dtype: type = np.float64,
+    dtype: DTypeLike = np.float64,
 ) -> np.ndarray:
     """Distances from each trace in `a` to each trace in `b`: [len(a), len(b)]."""
     _check_kind(kind)
@@ -190,7 +191,9 @@ class PreparedTraces:
             sub._X, sub._lens = np.ascontiguousarray(self._X[rows]), self._lens[rows]
         return sub
 
-    def distances_to(self, idx: np.ndarray, rows: np.ndarray | None = None, dtype: type = np.float64) -> np.ndarray:
+    def distances_to(
+        self, idx: np.ndarray, rows: np.ndarray | None = None, dtype: DTypeLike = np.float64
+    ) -> np.ndarray:
         """[len(rows) or n, len(idx)]: the traces at `rows` (default all) against those at `idx`."""
         idx = np.asarray(idx, dtype=np.int64)
         if self.kind == "edit":

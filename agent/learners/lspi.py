@@ -8,10 +8,23 @@ Features come from a basis with `k` and `phi(states, actions) -> (n, k)` (dense 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import scipy.sparse as sp
+
+
+class Basis(Protocol):
+    """What LSPI needs of a linear architecture: `k` features per (state, action) pair over
+    `n_actions` actions, and `phi(states, actions)` -> feature rows [n, k] (dense or scipy sparse)."""
+
+    @property
+    def k(self) -> int: ...
+
+    @property
+    def n_actions(self) -> int: ...
+
+    def phi(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray | sp.csr_matrix: ...
 
 
 @dataclass(frozen=True)
@@ -62,7 +75,7 @@ class RBFBasis:
 class LSPI:
     def __init__(
         self,
-        basis: TabularBasis,
+        basis: Basis,
         gamma: float = 0.9,
         ridge: float = 1e-3,
         capacity: int = 50_000,
@@ -82,10 +95,10 @@ class LSPI:
         self.reset()
 
     def reset(self) -> None:
-        self._s: list[int] = []
+        self._s: list[float] = []
         self._a: list[int] = []
         self._r: list[float] = []
-        self._s2: list[int] = []
+        self._s2: list[float] = []
         self._done: list[bool] = []
         self.w = np.zeros(self.basis.k)
         self.iterations = 0
@@ -119,7 +132,7 @@ class LSPI:
     def n_samples(self) -> int:
         return len(self._s)
 
-    def learn_one(self, s: int, a: int, r: float, s_next: int, done: bool) -> None:
+    def learn_one(self, s: float, a: int, r: float, s_next: float, done: bool) -> None:
         self._s.append(s)
         self._a.append(int(a))
         self._r.append(float(r))
@@ -129,11 +142,11 @@ class LSPI:
             for buf in (self._s, self._a, self._r, self._s2, self._done):
                 del buf[0]
 
-    def q(self, s: int) -> np.ndarray:
+    def q(self, s: float) -> np.ndarray:
         n = self.basis.n_actions
         return np.asarray(self.basis.phi(np.full(n, s), np.arange(n)) @ self.w).reshape(-1)
 
-    def greedy(self, s: int, prefer: int | None = None) -> int:
+    def greedy(self, s: float, prefer: int | None = None) -> int:
         """argmax_a Q(s, a); among near-ties (within `tie_tolerance` of the best, relative), keep
         `prefer` (e.g. the previous action) if it is one of them, else the lowest index. Consistent
         tie-breaking gives consistent traces, which the embedding needs. The tolerance is relative
@@ -165,7 +178,8 @@ class LSPI:
         A2 = self._greedy_many(S2)
         Phi = self.basis.phi(S, A)
         Phi2 = self.basis.phi(S2, A2)
-        Phi2 = Phi2.multiply((~done)[:, None]).tocsr() if sp.issparse(Phi2) else Phi2 * (~done)[:, None]
+        # dense features are an ndarray; anything else is scipy sparse (issparse), masked the sparse way
+        Phi2 = Phi2 * (~done)[:, None] if isinstance(Phi2, np.ndarray) else Phi2.multiply((~done)[:, None]).tocsr()
         Amat = Phi.T @ (Phi - self.gamma * Phi2)
         Amat = Amat.toarray() if sp.issparse(Amat) else np.asarray(Amat)
         b = np.asarray(Phi.T @ R).reshape(-1)

@@ -10,12 +10,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from sensorimotor.agent.snapshot import rng_state, set_rng_state
 
 
 class TileCoder:
-    def __init__(self, low: np.ndarray, high: np.ndarray, tiles: int = 10, n_tilings: int = 8) -> None:
+    def __init__(self, low: ArrayLike, high: ArrayLike, tiles: int = 10, n_tilings: int = 8) -> None:
         self.low, self.high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         if self.low.shape != self.high.shape or not (self.high > self.low).all():
             raise ValueError("low/high must have the same shape and high > low")

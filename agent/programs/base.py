@@ -89,6 +89,7 @@ class Program(abc.ABC):
 
     name = "program"
     Params: ClassVar[type] = EchoParams
+    params: Any  # the parsed `Params` instance the program was made with (set by each constructor)
     # settings for the daemon's drop detector that suit this program's `performance` stream, e.g. a
     # shorter warm-up for one value per episode than for one per step
     detector_params: dict[str, Any] = {}

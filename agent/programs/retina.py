@@ -110,15 +110,16 @@ class RetinaProgram(Program):
             drop_step=drop_step,
         )
 
-    def _settled(self) -> bool:
-        """Back to 90 % of the reward before the drop, or (when that level is out of reach, as
-        after a lesion) no gain of more than `settle_gain` between the last two windows."""
-        since = self.episodes - self._drop[1]
+    def _settled(self, drop: tuple[int, int, float]) -> bool:
+        """Back to 90 % of the reward before the `drop` (step, episode, reward before), or (when
+        that level is out of reach, as after a lesion) no gain of more than `settle_gain` between
+        the last two windows."""
+        since = self.episodes - drop[1]
         w = self.settle_window
         if since < w:
             return False
         now = float(np.mean(self._rewards[-w:]))
-        if now >= 0.9 * self._drop[2]:
+        if now >= 0.9 * drop[2]:
             return True
         if since < max(self.settle_min, 2 * w):
             return False
@@ -131,7 +132,7 @@ class RetinaProgram(Program):
             self._pre = f
             self._action = self.learner.act(f)
             return Decision(tuple(float(v) for v in self._action))
-        if self._pre is not None and obs.t > 0:
+        if self._pre is not None and self._action is not None and obs.t > 0:  # set together in the t == 0 branch
             self.learner.learn_one(self._pre, self._action, obs.reward)
             self.episodes += 1
             self._rewards.append(float(obs.reward))
@@ -139,17 +140,17 @@ class RetinaProgram(Program):
                 del self._rewards[: -2 * self.settle_window]
             if self.episodes % self.embed_every == 0:
                 self.emit(self.embedding(Trigger.PERIODIC, obs.step))
-            if self._drop is not None and self._settled():
+            drop = self._drop
+            if drop is not None and self._settled(drop):
                 self.emit(
                     EventOutput(
                         EventKind.RELEARNED,
-                        f"reward settled {self.episodes - self._drop[1]} episodes "
-                        f"after the drop at step {self._drop[0]}",
+                        f"reward settled {self.episodes - drop[1]} episodes after the drop at step {drop[0]}",
                         obs.step,
-                        {"episodes": float(self.episodes - self._drop[1])},
+                        {"episodes": float(self.episodes - drop[1])},
                     )
                 )
-                self.emit(self.embedding(Trigger.RELEARNED, obs.step, drop_step=self._drop[0]))
+                self.emit(self.embedding(Trigger.RELEARNED, obs.step, drop_step=drop[0]))
                 self.learner.end_relearning()
                 self._drop = None
         self._pre = None

@@ -11,6 +11,7 @@ lengths, Eq 7.3), classical MDS to 1-D.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,7 +50,7 @@ class VergencePractice:
         self.new_samples = 0
         self._prev: tuple[float, int] | None = None
 
-    def observe(self, obs: Observation, d: float, terminal: bool, emit) -> bool:
+    def observe(self, obs: Observation, d: float, terminal: bool, emit: Callable[[EventOutput], None]) -> bool:
         """Learn from the step that led to `obs`; True when an LSPI iteration has just run."""
         if obs.t > 0 and self._prev is not None:
             self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, terminal)
