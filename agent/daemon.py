@@ -47,6 +47,37 @@ log = logging.getLogger("sme.agent")
 
 
 class AgentDaemon:
+    """The agent daemon: discovers worlds on the bus, attaches a `WorldLink` to each, checkpoints.
+
+    Parameters
+    ----------
+    bus : Bus
+        The message bus (Zenoh session or an in-process stand-in).
+    agent_id : str, default keys.DEFAULT_AGENT_ID
+        The agent's id in key expressions.
+    seed : int, default 0
+        Seed of every program's generator.
+    state_dir : str, optional
+        Directory of the checkpoints (`<world>.ckpt.npz`); without it nothing is saved or loaded.
+    checkpoint_every : float, default 30.0
+        Seconds between checkpoints while `run` loops.
+    program_params : dict, optional
+        `{program: {key: value}}` hyperparameters, validated at once.
+    on_output : callable, optional
+        Also called with `(channel, message)` for every embedding and event published.
+    threaded_links : bool, default False
+        Run each link on its own thread instead of in the bus callback.
+    detector : str, default DEFAULT_DETECTOR
+        The drop detector of every link (see `agent.detectors.DETECTORS`).
+
+    Examples
+    --------
+    ::
+
+        with AgentDaemon(bus, state_dir="state") as daemon:  # start() ... close()
+            daemon.run(seconds=60)
+    """
+
     def __init__(
         self,
         bus: Bus,
@@ -90,6 +121,7 @@ class AgentDaemon:
         return pub
 
     def publish(self, channel: str, msg: Any) -> None:
+        """Publish a link's message on its channel's key (and pass embeddings and events to `on_output`)."""
         wid = msg.world_id
         if channel == "act":
             key = keys.world_act(wid)
@@ -154,6 +186,7 @@ class AgentDaemon:
         return codec.encode(self.status())
 
     def status(self) -> AgentStatus:
+        """The agent's status: uptime, every link's status and the daemon's counters."""
         links = tuple(link.status() for link in list(self.links.values()))
         return AgentStatus(self.agent_id, time.time() - self._started, links, dict(self.counters), time.time())
 
@@ -320,6 +353,7 @@ class AgentDaemon:
 
     # main loop ---------------------------------------------------------------------------------
     def start(self) -> None:
+        """Declare the status queryable and liveliness token, subscribe, and watch for worlds."""
         self.bus.queryable(keys.agent_status(self.agent_id), self._status, codec.schema_name(AgentStatus))
         self.bus.subscribe(keys.ALL_OBS, self._on_obs)
         self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
@@ -348,9 +382,11 @@ class AgentDaemon:
                 last_ckpt = time.monotonic()
 
     def stop(self) -> None:
+        """Make `run` return."""
         self._stop.set()
 
     def close(self) -> None:
+        """Stop, stop every link and write a final checkpoint."""
         self._stop.set()
         for link in list(self.links.values()):
             link.stop()

@@ -110,6 +110,7 @@ class Program(abc.ABC):
         return out
 
     def emit(self, item: Any) -> None:
+        """Queue an `EmbeddingOutput` or `EventOutput` for the link (see `drain`)."""
         self._outbox.append(item)
 
     def world_restarted(self) -> None:
@@ -146,4 +147,5 @@ class EchoProgram(Program):
         self.params = parse(EchoParams, overrides, name=self.name, base=params)
 
     def act(self, obs: Observation) -> Decision:
+        """Action 0, whatever the observation."""
         return Decision((0.0,))

@@ -73,6 +73,14 @@ class MountainCarProgramParams:
 
 
 class MountainCarProgram(Program):
+    """The visual mountain car (ch. 8): vergence geometry first, then Sarsa(lambda) driving on it.
+
+    Built by `make_program` as `MountainCarProgram(spec, seed, params=None, **overrides)`; the
+    hyperparameters are `MountainCarProgramParams`. Needs 5 discrete actions (converge, diverge,
+    reverse, coast, forward), sensors "left" and "right", and spec params `n_positions` (sweep
+    states) and `n_eval` (evaluation states).
+    """
+
     name = "mountaincar"
     # one value per training episode: a short warm-up, and a reference that follows an improving
     # driver within some 20 episodes
@@ -244,6 +252,7 @@ class MountainCarProgram(Program):
 
     @property
     def evaluating(self) -> bool:
+        """Whether learning is halted for an evaluation run."""
         return self.phase == "evaluate"
 
     def _start_training_episode(self) -> None:
@@ -350,6 +359,7 @@ class MountainCarProgram(Program):
 
     # Program interface ---------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
+        """Dispatch to the current stage: explore, sweep (then embed), or drive/evaluate."""
         if self.phase == "explore":
             return self._explore(obs, foveal_difference(obs))
         if self.phase == "sweep":
@@ -357,6 +367,7 @@ class MountainCarProgram(Program):
         return self._drive(obs)
 
     def performance(self, obs: Observation) -> float | None:
+        """-(car steps) / report_after of a training episode that just ended, once; else None."""
         out, self._perf = self._perf, None
         return out
 
@@ -430,6 +441,8 @@ class MountainCarProgram(Program):
         }
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a program built with the same spec and params; the
+        driver is rebuilt from its saved bounds and seed."""
         super().restore(state)
         self.lspi.restore(state["lspi"])
         self.practice.restore(state["practice"])
@@ -476,6 +489,7 @@ class MountainCarProgram(Program):
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
 
     def world_restarted(self) -> None:
+        """Drop the pending vergence sample and restart the trace and episode in progress."""
         self.practice.reset()
         self._sweep.interrupted()
         self._start_training_episode()

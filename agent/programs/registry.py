@@ -25,9 +25,11 @@ class ProgramKind:
     summary: str
 
     def program_class(self) -> type[Program]:
+        """The Program class (imports its module)."""
         return getattr(importlib.import_module(f"sensorimotor.agent.programs.{self.module}"), self.cls)
 
     def params_type(self) -> type:
+        """The program's parameter dataclass (imports its module)."""
         return getattr(importlib.import_module(f"sensorimotor.agent.programs.{self.module}"), self.params)
 
 
@@ -89,8 +91,36 @@ def check_program_params(params: Mapping[str, Mapping[str, Any]] | None) -> dict
 
 
 def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
-    """The program for `spec` (its `program` hint, else its kind), with hyperparameters `kw`
-    (strings or typed values, validated against the program's declaration)."""
+    """The program for a world spec, built with its seed and hyperparameters.
+
+    Parameters
+    ----------
+    spec : WorldSpec
+        The world; its `program` hint (else its `kind`) names the program in `PROGRAMS`.
+    seed : int, default 0
+        Seed of the program's random generator (programs are deterministic given it).
+    **kw
+        Hyperparameters of that program (strings or typed values), validated against its
+        `Params` dataclass.
+
+    Returns
+    -------
+    Program
+        A fresh program.
+
+    Raises
+    ------
+    ValueError
+        If no program fits the spec; `ParamError` for an unknown or invalid parameter;
+        `SpecMismatch` if the world's sensors or actions do not suit the program.
+
+    Examples
+    --------
+    ::
+
+        program = make_program(spec, seed=0, samples_per_iteration="300")
+        decision = program.act(observation)
+    """
     name = spec.program or spec.kind
     if name not in PROGRAMS:
         raise ValueError(

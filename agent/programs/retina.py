@@ -44,6 +44,12 @@ class RetinaProgramParams:
 
 
 class RetinaProgram(Program):
+    """The retina program (ch. 4): saccade learning, field positions published as the embedding.
+
+    Built by `make_program` as `RetinaProgram(spec, seed, params=None, **overrides)`; the
+    hyperparameters are `RetinaProgramParams`. Needs a 2-D box action space and a "fields" sensor.
+    """
+
     name = "retina"
     Params = RetinaProgramParams
 
@@ -127,6 +133,7 @@ class RetinaProgram(Program):
         return now <= before * (1 + self.settle_gain) + 1e-9
 
     def act(self, obs: Observation) -> Decision:
+        """Saccade at the start of an episode; learn from its reward at the end, then reset."""
         f = self._fields(obs)
         if obs.t == 0 and not obs.done:
             self._pre = f
@@ -164,12 +171,14 @@ class RetinaProgram(Program):
         return float(np.log1p(max(obs.reward, 0.0))) if obs.t > 0 and obs.done else None
 
     def on_drop(self, step: int) -> None:
+        """Reset the reward estimates (exploration rises) and remember the drop until relearned."""
         self.learner.reset_estimates()
         before = self._rewards[-2 * self.settle_window : -50] or self._rewards
         self._drop = (step, self.episodes, float(np.mean(before)) if before else 0.0)
         self.emit(EventOutput(EventKind.RELEARNING, "reward estimates reset; exploration raised", step))
 
     def state(self) -> dict[str, Any]:
+        """The base snapshot plus the learner, counters, pending saccade, recent rewards and drop (see the convention in `agent.programs.base`)."""
         return {
             **super().state(),
             "learner": self.learner.state(),
@@ -182,6 +191,7 @@ class RetinaProgram(Program):
         }
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a program built with the same spec and params."""
         super().restore(state)
         self.learner.restore(state["learner"])
         self.episodes, self.version = int(state["episodes"]), int(state["version"])
@@ -191,4 +201,5 @@ class RetinaProgram(Program):
         self._drop = None if drop is None else (int(drop[0]), int(drop[1]), float(drop[2]))
 
     def world_restarted(self) -> None:
+        """Forget the saccade in flight: its outcome will not arrive."""
         self._pre = None
