@@ -171,7 +171,7 @@ class GridworldProgram(Program):
 
     # saved state ---------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
-        """The base snapshot plus LSPI, phase, sweep and traces (see the convention in `agent.programs.base`)."""
+        """The base snapshot plus LSPI, phase, sweep and traces (see `agent.programs.base`)."""
         return {
             **super().state(),
             "lspi": self.lspi.state(),

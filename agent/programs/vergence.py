@@ -173,7 +173,7 @@ class VergenceProgram(Program):
         )
 
     def state(self) -> dict[str, Any]:
-        """The base snapshot plus LSPI, practice, phase and sweep (see the convention in `agent.programs.base`)."""
+        """The base snapshot plus LSPI, practice, phase and sweep (see `agent.programs.base`)."""
         return {
             **super().state(),
             "lspi": self.lspi.state(),
