@@ -178,7 +178,7 @@ class RetinaProgram(Program):
         self.emit(EventOutput(EventKind.RELEARNING, "reward estimates reset; exploration raised", step))
 
     def state(self) -> dict[str, Any]:
-        """The base snapshot plus the learner, counters, pending saccade, recent rewards and drop (see `agent.programs.base`)."""
+        """The base snapshot plus the learner, counters, pending saccade, recent rewards and drop."""
         return {
             **super().state(),
             "learner": self.learner.state(),
