@@ -98,7 +98,34 @@ def attach(
     A previous link to the same body resumes with everything it learned; otherwise the link starts
     from `restored` (a checkpoint for the same body), or from `program` and `detector` when the
     caller built them, or else from the program and detector `config` names. The link publishes an
-    `attached` (or `resumed`) event. Raises ValueError (or ProtocolError) when no program fits.
+    `attached` (or `resumed`) event.
+
+    Parameters
+    ----------
+    spec : WorldSpec
+        The world as it announced itself.
+    config : AgentConfig
+        Agent id, seed, detector and program parameters.
+    publish : callable
+        `publish(channel, message)` for the link.
+    truth : Truth, optional
+        Ground truth for scoring (never seen by the program).
+    previous : WorldLink, optional
+        The link this world had before, if any.
+    restored : Restored, optional
+        State read back from a checkpoint.
+    program, detector : optional
+        A program (and detector) the caller built, used when there is nothing to resume or restore.
+
+    Returns
+    -------
+    Attached
+        The link and how it came to be: "new", "restored" or "resumed".
+
+    Raises
+    ------
+    ValueError
+        (or ProtocolError) When no program fits the spec.
     """
     if previous is not None and same_body(previous.spec, spec):
         previous.truth = truth or previous.truth

@@ -126,7 +126,9 @@ def encode_checkpoint(ckpt: Checkpoint) -> bytes:
     }
     text = json.dumps(meta, allow_nan=True, separators=(",", ":")).encode("utf-8")
     buf = io.BytesIO()
-    np.savez(buf, **{META_ENTRY: np.frombuffer(text, dtype=np.uint8)}, **arrays)
+    # numpy's stub types **kwds against `allow_pickle: bool` too; entry names here are dotted state
+    # paths and META_ENTRY, never "allow_pickle"
+    np.savez(buf, **{META_ENTRY: np.frombuffer(text, dtype=np.uint8)}, **arrays)  # type: ignore[arg-type]
     return buf.getvalue()
 
 
@@ -159,7 +161,29 @@ def set_aside_checkpoint(path: str, why: str) -> str:
 
 
 def write_checkpoint(path: str, ckpt: Checkpoint) -> None:
-    """Write `ckpt` to `path` atomically."""
+    """Write `ckpt` to `path` atomically (a crash leaves the old file or the new one).
+
+    Parameters
+    ----------
+    path : str
+        Destination, conventionally `<state_dir>/<world>.ckpt.npz`.
+    ckpt : Checkpoint
+        What to save; its states must be arrays and plain values.
+
+    Raises
+    ------
+    ValueError
+        If a state holds something other than arrays and plain values.
+    OSError
+        If the file cannot be written.
+
+    Examples
+    --------
+    ::
+
+        write_checkpoint("w1.ckpt.npz", ckpt)
+        assert read_checkpoint("w1.ckpt.npz").program_class == ckpt.program_class
+    """
     write_atomically(path, encode_checkpoint(ckpt))
 
 
@@ -252,8 +276,23 @@ def decode_checkpoint(data: bytes) -> Checkpoint:
 
 
 def read_checkpoint(path: str) -> Checkpoint:
-    """Load the checkpoint at `path` (no pickle is ever loaded); CheckpointError if it is not one
-    this version can read."""
+    """Load the checkpoint at `path`; no pickle is ever loaded.
+
+    Parameters
+    ----------
+    path : str
+        A file written by `write_checkpoint`.
+
+    Returns
+    -------
+    Checkpoint
+        The saved body, version, program class, params and state, and detector state.
+
+    Raises
+    ------
+    CheckpointError
+        If the file cannot be read or is not a checkpoint this version can read.
+    """
     try:
         with open(path, "rb") as f:
             data = f.read()

@@ -47,6 +47,37 @@ log = logging.getLogger("sme.agent")
 
 
 class AgentDaemon:
+    """The agent daemon: discovers worlds on the bus, attaches a `WorldLink` to each, checkpoints.
+
+    Parameters
+    ----------
+    bus : Bus
+        The message bus (Zenoh session or an in-process stand-in).
+    agent_id : str, default keys.DEFAULT_AGENT_ID
+        The agent's id in key expressions.
+    seed : int, default 0
+        Seed of every program's generator.
+    state_dir : str, optional
+        Directory of the checkpoints (`<world>.ckpt.npz`); without it nothing is saved or loaded.
+    checkpoint_every : float, default 30.0
+        Seconds between checkpoints while `run` loops.
+    program_params : dict, optional
+        `{program: {key: value}}` hyperparameters, validated at once.
+    on_output : callable, optional
+        Also called with `(channel, message)` for every embedding and event published.
+    threaded_links : bool, default False
+        Run each link on its own thread instead of in the bus callback.
+    detector : str, default DEFAULT_DETECTOR
+        The drop detector of every link (see `agent.detectors.DETECTORS`).
+
+    Examples
+    --------
+    ::
+
+        with AgentDaemon(bus, state_dir="state") as daemon:  # start() ... close()
+            daemon.run(seconds=60)
+    """
+
     def __init__(
         self,
         bus: Bus,
@@ -90,6 +121,7 @@ class AgentDaemon:
         return pub
 
     def publish(self, channel: str, msg: Any) -> None:
+        """Publish a link's message on its channel's key (and pass embeddings and events to `on_output`)."""
         wid = msg.world_id
         if channel == "act":
             key = keys.world_act(wid)
@@ -154,6 +186,7 @@ class AgentDaemon:
         return codec.encode(self.status())
 
     def status(self) -> AgentStatus:
+        """The agent's status: uptime, every link's status and the daemon's counters."""
         links = tuple(link.status() for link in list(self.links.values()))
         return AgentStatus(self.agent_id, time.time() - self._started, links, dict(self.counters), time.time())
 
@@ -173,8 +206,9 @@ class AgentDaemon:
             raise last
         return None
 
-    def _checkpoint_path(self, wid: str) -> str | None:
-        return os.path.join(self.state_dir, f"{wid}.ckpt.npz") if self.state_dir else None
+    @staticmethod
+    def _checkpoint_path(state_dir: str, wid: str) -> str:
+        return os.path.join(state_dir, f"{wid}.ckpt.npz")
 
     def _load_checkpoint(self, spec: WorldSpec) -> Restored | None:
         """The saved link for this world, or None to start fresh: the program rebuilt from its
@@ -183,14 +217,17 @@ class AgentDaemon:
         as NAME.bad-<UTC time>, one learned on another body (kind, program, sensors, actions) as
         NAME.other-body-<UTC time>: its state cannot serve this world, and left in place it would
         be overwritten by the next checkpoint. Pickles (the old NAME.pkl) are never loaded."""
-        path = self._checkpoint_path(spec.world_id)
-        if path and os.path.exists(os.path.join(self.state_dir, f"{spec.world_id}.pkl")):
+        state_dir = self.state_dir
+        if not state_dir:
+            return None
+        path = self._checkpoint_path(state_dir, spec.world_id)
+        if os.path.exists(os.path.join(state_dir, f"{spec.world_id}.pkl")):
             log.warning(
                 "world %s: ignoring the old pickle checkpoint %s.pkl (pickles are never loaded)",
                 spec.world_id,
                 spec.world_id,
             )
-        if not path or not os.path.exists(path):
+        if not os.path.exists(path):
             return None
 
         def set_aside(why: str, reason: str) -> None:
@@ -238,10 +275,11 @@ class AgentDaemon:
 
     def checkpoint(self) -> None:
         """Write every link's learned state to STATE_DIR/<world>.ckpt.npz (atomically, no pickle)."""
-        if not self.state_dir:
+        state_dir = self.state_dir
+        if not state_dir:
             return
         for wid, link in list(self.links.items()):
-            path = self._checkpoint_path(wid)
+            path = self._checkpoint_path(state_dir, wid)
             with link.lock:  # a consistent snapshot (copies): the file is written while the link runs on
                 program, spec = link.program, link.spec
                 ckpt = Checkpoint(
@@ -315,6 +353,7 @@ class AgentDaemon:
 
     # main loop ---------------------------------------------------------------------------------
     def start(self) -> None:
+        """Declare the status queryable and liveliness token, subscribe, and watch for worlds."""
         self.bus.queryable(keys.agent_status(self.agent_id), self._status, codec.schema_name(AgentStatus))
         self.bus.subscribe(keys.ALL_OBS, self._on_obs)
         self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
@@ -343,9 +382,11 @@ class AgentDaemon:
                 last_ckpt = time.monotonic()
 
     def stop(self) -> None:
+        """Make `run` return."""
         self._stop.set()
 
     def close(self) -> None:
+        """Stop, stop every link and write a final checkpoint."""
         self._stop.set()
         for link in list(self.links.values()):
             link.stop()

@@ -54,6 +54,8 @@ def check_against_spec(obs: Observation, spec: WorldSpec) -> None:
 
 @dataclass
 class LinkCounters:
+    """What a link has seen and done: counts of steps, episodes, rejected inputs, embeddings, drops."""
+
     steps: int = 0
     episodes: int = 0
     duplicates: int = 0
@@ -68,7 +70,32 @@ class LinkCounters:
 
 
 class WorldLink:
-    """The agent's side of one world: see the module docstring."""
+    """The agent's side of one world: checks its observations, runs its program, answers with
+    actions, watches the program's performance with a drop detector, and scores and publishes
+    the embeddings and events the program produces.
+
+    Parameters
+    ----------
+    agent_id : str
+        Id of the agent, carried by every message the link publishes.
+    spec : WorldSpec
+        The world's spec: observations are checked against its sensors.
+    program : Program
+        The developmental program that answers the observations.
+    publish : callable
+        `publish(channel, message)`, channel one of "act", "embedding", "event".
+    detector : DropDetector, optional
+        Watches `program.performance`; on a detection the program's `on_drop` is called.
+    inbox_size : int, default 256
+        Capacity of the bounded inbox of threaded mode (`start`).
+
+    Examples
+    --------
+    In-process, without a bus::
+
+        link = WorldLink("agent", spec, make_program(spec), publish, make_detector())
+        action = link.handle(observation_payload)  # or link.answer(observation)
+    """
 
     REWARD_EMA = 0.01
     EVENT_RATE = 5.0  # bad-input and error events per second at most; counters count everything
@@ -106,21 +133,25 @@ class WorldLink:
 
     # lifecycle ---------------------------------------------------------------------------------
     def start(self) -> None:
+        """Threaded mode: run `handle` on the link's own thread, fed by its inbox."""
         if self._thread is None or not self._thread.is_alive():
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name=f"link-{self.world_id}", daemon=True)
             self._thread.start()
 
     def stop(self) -> None:
+        """Stop the link's thread (if any) and close its inbox."""
         self._stop.set()
         self.inbox.close()
         if self._thread is not None:
             self._thread.join(timeout=5)
 
     def pause(self) -> None:
+        """Answer nothing until `resume` (the world vanished)."""
         self.state = "paused"
 
     def resume(self, spec: WorldSpec) -> None:
+        """Answer again after a pause; a new session of the world restarts the program's episode."""
         with self.lock:
             self._failures = 0
             if spec.session != self.session:
@@ -220,9 +251,10 @@ class WorldLink:
             self.reject(e.kind, str(e), obs.step)
             return None
         except Exception as e:  # a program bug must not kill the link or lose what it learned
-            dec = self._program_failed(e, obs.step)
-            if dec is None:
+            fallback = self._program_failed(e, obs.step)
+            if fallback is None:
                 return None
+            dec = fallback
         act = Action(self.world_id, obs.step, tuple(float(v) for v in dec.values), dec.reset, dec.start, time.time())
         self._last_step, self._last_action = obs.step, act
         self.publish("act", act)
@@ -231,17 +263,18 @@ class WorldLink:
         if obs.t == 0:
             c.episodes += 1
         c.reward_mean += self.REWARD_EMA * (obs.reward - c.reward_mean)
-        perf = self.program.performance(obs) if self.detector is not None else None
-        if perf is not None:
-            ref = self.detector.reference
-            if self.detector.update(perf):
+        detector = self.detector
+        perf = self.program.performance(obs) if detector is not None else None
+        if detector is not None and perf is not None:
+            ref = detector.reference
+            if detector.update(perf):
                 c.drops += 1
                 self.event(
                     EventKind.DROP_DETECTED,
-                    f"{self.detector.name} saw the reward drop (now {perf:.4g}, reference {ref:.4g})",
+                    f"{detector.name} saw the reward drop (now {perf:.4g}, reference {ref:.4g})",
                     obs.step,
                     {"reward": perf, "reference": ref},
-                    reason=self.detector.name,
+                    reason=detector.name,
                 )
                 self.program.on_drop(obs.step)
         for item in self.program.drain():
@@ -317,6 +350,7 @@ class WorldLink:
             self.event(item.kind, item.detail, item.step, item.values, reason=item.reason)
 
     def status(self) -> LinkStatus:
+        """The link's `LinkStatus` for the agent's status queryable."""
         c = self.counters
         stat = float(self.detector.statistic) if self.detector is not None else 0.0
         return LinkStatus(

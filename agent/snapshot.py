@@ -12,7 +12,7 @@ import numpy as np
 
 def rng_state(rng: np.random.Generator) -> dict[str, Any]:
     """The generator's full state as a plain dict (a copy)."""
-    return copy.deepcopy(rng.bit_generator.state)
+    return dict(copy.deepcopy(rng.bit_generator.state))
 
 
 def set_rng_state(rng: np.random.Generator, state: dict[str, Any]) -> None:

@@ -11,6 +11,13 @@ from typing import Any
 
 
 class DropDetector(abc.ABC):
+    """Base of the reward-drop detectors: a sequential test fed one performance value at a time.
+
+    Subclasses implement `_update`, `statistic` and `reset`; `name` identifies them in events and
+    saved state. A detection is reported once, on the step it happens, after which the detector
+    learns its reference afresh.
+    """
+
     name = "detector"
 
     def __init__(self) -> None:
@@ -21,6 +28,32 @@ class DropDetector(abc.ABC):
     def _update(self, x: float) -> bool: ...
 
     def update(self, x: float) -> bool:
+        """Feed one value of the watched stream (e.g. a reward).
+
+        Parameters
+        ----------
+        x : float
+            The next value; must be finite.
+
+        Returns
+        -------
+        bool
+            True on the step a drop is detected (also kept in `drift_detected`).
+
+        Raises
+        ------
+        ValueError
+            If `x` is NaN or infinite.
+
+        Examples
+        --------
+        Watch a stream and relearn when it drops::
+
+            det = make_detector("cusum")
+            for r in rewards:
+                if det.update(r):
+                    relearn()
+        """
         x = float(x)
         if not math.isfinite(x):
             raise ValueError(f"{self.name}: reward must be finite, got {x!r}")
@@ -30,7 +63,8 @@ class DropDetector(abc.ABC):
 
     @property
     @abc.abstractmethod
-    def statistic(self) -> float: ...
+    def statistic(self) -> float:
+        """The current test statistic (for plots and status), on the detector's own scale."""
 
     @property
     def reference(self) -> float:
@@ -39,7 +73,8 @@ class DropDetector(abc.ABC):
         return ref.mean if ref is not None and ref.count else float("nan")
 
     @abc.abstractmethod
-    def reset(self) -> None: ...
+    def reset(self) -> None:
+        """Forget everything: the next sample starts a new warm-up."""
 
     def state(self) -> dict[str, Any]:
         """A snapshot of the running statistics; `name` says which detector it belongs to."""
@@ -74,11 +109,13 @@ class RunningMoments:
         self.reset()
 
     def push(self, x: float) -> None:
+        """Queue `x`; the sample `lag` steps back joins the moments."""
         self._pending.append(x)
         if len(self._pending) > self.lag:
             self.add(self._pending.popleft())
 
     def reset(self) -> None:
+        """Forget all samples, queued ones included."""
         self._pending: collections.deque[float] = collections.deque()
         self.count = 0
         self.mean = 0.0
@@ -87,13 +124,16 @@ class RunningMoments:
 
     @property
     def ready(self) -> bool:
+        """Whether the warm-up is over (the moments describe a reference)."""
         return self.count >= self.warmup
 
     @property
     def sd(self) -> float:
+        """Standard deviation of the reference (floored at 1e-6, so z-scores stay finite)."""
         return math.sqrt(max(self.var, 1e-12))
 
     def add(self, x: float) -> None:
+        """Let `x` join the moments now (exact during warm-up, exponentially weighted after)."""
         self.count += 1
         if self.count <= self.warmup:
             d = x - self.mean
@@ -106,6 +146,7 @@ class RunningMoments:
             self.var = (1 - self.rate) * (self.var + self.rate * d * d)
 
     def z(self, x: float) -> float:
+        """`x` standardised against the reference: (x - mean) / sd."""
         return (x - self.mean) / self.sd
 
     def state(self) -> dict[str, Any]:
@@ -113,6 +154,7 @@ class RunningMoments:
         return {"pending": list(self._pending), "count": self.count, "mean": self.mean, "m2": self._m2, "var": self.var}
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of moments with the same settings."""
         self._pending = collections.deque(float(x) for x in state["pending"])
         self.count = int(state["count"])
         self.mean, self._m2, self.var = float(state["mean"]), float(state["m2"]), float(state["var"])
@@ -126,6 +168,7 @@ class ReferencedDetector(DropDetector):
         self._ref = RunningMoments(warmup, rate)
 
     def reset(self) -> None:
+        """Forget the reference and the statistic; the next sample starts a new warm-up."""
         self.n = 0
         self.drift_detected = False
         self._ref.reset()
@@ -136,8 +179,10 @@ class ReferencedDetector(DropDetector):
         """Forget the detector's own statistic."""
 
     def state(self) -> dict[str, Any]:
+        """The base snapshot plus the reference moments."""
         return {**super().state(), "reference": self._ref.state()}
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot (reference moments included)."""
         super().restore(state)
         self._ref.restore(state["reference"])

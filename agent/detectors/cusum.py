@@ -12,6 +12,20 @@ from sensorimotor.agent.detectors.base import ReferencedDetector
 
 
 class CUSUM(ReferencedDetector):
+    """One-sided standardised CUSUM for drops (see the module docstring).
+
+    Parameters
+    ----------
+    k : float, default 0.5
+        Allowance, in reference standard deviations, subtracted at every step.
+    h : float, default 9.0
+        Decision threshold on the cumulative sum.
+    warmup : int, default 100
+        Samples that form the first reference before anything can be detected.
+    rate : float, default 0.002
+        Rate at which the reference follows the stream after the warm-up.
+    """
+
     name = "cusum"
 
     def __init__(self, k: float = 0.5, h: float = 9.0, warmup: int = 100, rate: float = 0.002) -> None:
@@ -26,12 +40,15 @@ class CUSUM(ReferencedDetector):
 
     @property
     def statistic(self) -> float:
+        """The cumulative sum S (a drop when it exceeds `h`)."""
         return self._s
 
     def state(self) -> dict[str, Any]:
+        """The referenced detector's snapshot plus the sum S."""
         return {**super().state(), "s": self._s}
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a CUSUM with the same settings."""
         super().restore(state)
         self._s = float(state["s"])
 

@@ -13,6 +13,20 @@ from sensorimotor.agent.detectors.base import ReferencedDetector
 
 
 class MovingAverageDrop(ReferencedDetector):
+    """The dissertation's moving-average drop detector (see the module docstring).
+
+    Parameters
+    ----------
+    window : int, default 20
+        Length of the short moving average.
+    drop : float, default 5.0
+        Threshold, in standard errors of the short average below the reference mean.
+    warmup : int, default 200
+        Samples that form the first reference.
+    rate : float, default 0.002
+        Rate at which the reference follows the stream after the warm-up.
+    """
+
     name = "moving_average"
 
     def __init__(self, window: int = 20, drop: float = 5.0, warmup: int = 200, rate: float = 0.002) -> None:
@@ -28,12 +42,15 @@ class MovingAverageDrop(ReferencedDetector):
 
     @property
     def statistic(self) -> float:
+        """How far the short average is below the reference, in its standard errors."""
         return self._stat
 
     def state(self) -> dict[str, Any]:
+        """The referenced detector's snapshot plus the window and statistic."""
         return {**super().state(), "window_values": list(self._buf), "stat": self._stat}
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a detector with the same settings."""
         super().restore(state)
         self._buf = collections.deque((float(x) for x in state["window_values"]), maxlen=self.window)
         self._stat = float(state["stat"])

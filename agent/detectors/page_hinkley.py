@@ -12,6 +12,18 @@ from sensorimotor.agent.detectors.base import DropDetector
 
 
 class PageHinkley(DropDetector):
+    """Page-Hinkley test for drops (see the module docstring).
+
+    Parameters
+    ----------
+    delta : float, default 0.25
+        Magnitude allowance per step, in warm-up standard deviations.
+    threshold : float, default 16.0
+        Decision threshold on m_t - min m.
+    warmup : int, default 100
+        Samples used to estimate sigma before anything can be detected.
+    """
+
     name = "page_hinkley"
 
     def __init__(self, delta: float = 0.25, threshold: float = 16.0, warmup: int = 100) -> None:
@@ -22,6 +34,7 @@ class PageHinkley(DropDetector):
         self.reset()
 
     def reset(self) -> None:
+        """Forget everything: the next sample starts a new warm-up."""
         self.n = 0
         self.drift_detected = False
         self._count = 0
@@ -33,9 +46,11 @@ class PageHinkley(DropDetector):
 
     @property
     def statistic(self) -> float:
+        """m_t - min_s m_s (a drop when it exceeds `threshold`)."""
         return self._m - self._min
 
     def state(self) -> dict[str, Any]:
+        """The base snapshot plus the running sums."""
         return {
             **super().state(),
             "count": self._count,
@@ -47,6 +62,7 @@ class PageHinkley(DropDetector):
         }
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a detector with the same settings."""
         super().restore(state)
         self._count = int(state["count"])
         self._mean, self._m2, self._sd = float(state["mean"]), float(state["m2"]), float(state["sd"])
@@ -54,6 +70,7 @@ class PageHinkley(DropDetector):
 
     @property
     def reference(self) -> float:
+        """Mean of the samples since the last detection or reset (NaN when there are none)."""
         return self._mean if self._count else float("nan")
 
     def _update(self, x: float) -> bool:

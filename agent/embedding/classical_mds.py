@@ -24,6 +24,12 @@ FULL_BELOW = 600
 
 @dataclass(frozen=True)
 class MDSModel:
+    """Out-of-sample map of a classical MDS embedding (Gower's formula).
+
+    Places new points from their distances to the reference points without re-embedding; for a
+    reference point it gives back exactly its coordinates.
+    """
+
     basis: np.ndarray  # [n_ref, k]: V_k / sqrt(lambda_k) (0 where lambda <= 0)
     mean_sq: np.ndarray  # [n_ref]: column means of D^2 over the reference points
 
@@ -38,13 +44,18 @@ class MDSModel:
 
 @dataclass(frozen=True)
 class MDSResult:
+    """The result of `classical_mds`: coordinates, spectrum, the method used and the
+    out-of-sample `model`.
+    """
+
     coordinates: np.ndarray  # [n, k]
     eigenvalues: np.ndarray  # descending; the full spectrum for method "full", the top k otherwise
     method: str
-    model: MDSModel | None = None
+    model: MDSModel  # places new points from their distances to these ones
 
     @property
     def dims(self) -> int:
+        """Number of embedding dimensions (columns of `coordinates`)."""
         return self.coordinates.shape[1]
 
 
@@ -62,6 +73,40 @@ def double_centre(D: np.ndarray, overwrite: bool = False) -> tuple[np.ndarray, n
 
 
 def classical_mds(D: np.ndarray, k: int = 2, method: str = "auto", overwrite: bool = False) -> MDSResult:
+    """Classical (Torgerson) MDS of a distance matrix.
+
+    Parameters
+    ----------
+    D : np.ndarray
+        Square [n, n] matrix of pairwise distances (symmetric, zero diagonal, finite). Need not
+        be Euclidean: negative eigenvalues are reported, not hidden.
+    k : int, default 2
+        Embedding dimensions, 1 <= k <= n.
+    method : {"auto", "full", "topk"}, default "auto"
+        "full": dense eigendecomposition, the whole spectrum; "topk": Lanczos for the k largest
+        eigenvalues only; "auto" picks "full" for n <= FULL_BELOW (or k >= n - 1).
+    overwrite : bool, default False
+        Double-centre a float32/float64 `D` in place (no n x n copy); `D` is destroyed.
+
+    Returns
+    -------
+    MDSResult
+        `coordinates` [n, k] (eigenvector signs fixed, so equal inputs give equal bytes),
+        `eigenvalues` in descending order, the `method` used, and `model` to place new points.
+
+    Raises
+    ------
+    ValueError
+        If `D` is not square, has NaN/inf, `k` is out of range or `method` unknown.
+
+    Examples
+    --------
+    Embed points from their distances, then place a new point from its distances to them::
+
+        X = np.random.default_rng(0).normal(size=(50, 2))
+        res = classical_mds(cdist(X, X), k=2)  # res.coordinates: [50, 2]
+        y = res.model.transform(cdist([[0.5, 0.5]], X))  # [1, 2], in the same frame
+    """
     D = np.asarray(D)
     if D.ndim != 2 or D.shape[0] != D.shape[1]:
         raise ValueError(f"distance matrix must be square, got shape {D.shape}")

@@ -20,6 +20,10 @@ DistancesTo = Callable[[np.ndarray], np.ndarray]  # landmark indices [m] -> dist
 
 @dataclass(frozen=True)
 class LandmarkResult:
+    """The result of `landmark_mds`: coordinates of all n points, the landmark spectrum, the
+    landmark indices and the model that places new points from their landmark distances.
+    """
+
     coordinates: np.ndarray  # [n, k]
     eigenvalues: np.ndarray  # spectrum of the landmark embedding
     landmarks: np.ndarray  # indices of the landmarks
@@ -48,10 +52,32 @@ def landmark_mds(
     n_landmarks: int = 300,
     seed: int = 0,
     select: str = "maxmin",
-    candidate_distances_to: Callable[[np.ndarray], tuple[np.ndarray, DistancesTo]] | None = None,
+    candidate_distances_to: Callable[[np.ndarray], DistancesTo] | None = None,
 ) -> LandmarkResult:
-    """`candidate_distances_to(pool)` (optional) gives distances among a candidate pool cheaply;
-    max-min selection then runs on a random pool of 10 m points instead of all n."""
+    """Landmark MDS (de Silva & Tenenbaum 2004): embed m landmarks, place all n points.
+
+    Parameters
+    ----------
+    n : int
+        Number of points (>= 2).
+    distances_to : callable
+        `distances_to(idx)` -> [n, len(idx)]: distances of every point to the points `idx`.
+    k : int, default 2
+        Embedding dimensions.
+    n_landmarks : int, default 300
+        Landmarks m (at least k + 1, at most n).
+    seed : int, default 0
+        Seed of the landmark choice.
+    select : {"maxmin", "random"}, default "maxmin"
+        Greedy far-apart landmarks, or a uniform random subset.
+    candidate_distances_to : callable, optional
+        `candidate_distances_to(pool)` -> a `distances_to` over the points of `pool` only: max-min
+        selection then runs on a random pool of 10 m points instead of all n.
+
+    Returns
+    -------
+    LandmarkResult
+    """
     if n < 2:
         raise ValueError("need at least 2 points")
     m = min(n, max(k + 1, n_landmarks))

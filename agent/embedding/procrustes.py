@@ -10,6 +10,10 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ProcrustesResult:
+    """Procrustes alignment of an embedding onto truth: the `disparity` (sum of squared
+    differences after alignment, in [0, 1]), standardised `truth` and the `aligned` embedding.
+    """
+
     disparity: float
     truth: np.ndarray  # standardised truth (centred, unit Frobenius norm)
     aligned: np.ndarray  # embedding after the best similarity transform onto `truth`
@@ -24,8 +28,27 @@ def _standardise(X: np.ndarray, name: str) -> np.ndarray:
 
 
 def procrustes(truth: np.ndarray, embedding: np.ndarray) -> ProcrustesResult:
-    """Align `embedding` onto `truth` (rows are corresponding points). Columns are zero-padded to
-    the same count, so a 1-D embedding can be compared with 2-D truth."""
+    """Align `embedding` onto `truth` by translation, scale and rotation/reflection.
+
+    Rows are corresponding points. Columns are zero-padded to the same count, so a 1-D embedding
+    can be compared with 2-D truth. Matches `scipy.spatial.procrustes`.
+
+    Parameters
+    ----------
+    truth : np.ndarray
+        Ground-truth positions, [n, d] (or [n]); used for evaluation only.
+    embedding : np.ndarray
+        Learned coordinates of the same n points, [n, k] (or [n]).
+
+    Returns
+    -------
+    ProcrustesResult
+
+    Raises
+    ------
+    ValueError
+        If the row counts differ, n < 2, or either set has all points identical.
+    """
     A = np.asarray(truth, dtype=np.float64)
     B = np.asarray(embedding, dtype=np.float64)
     A = A.reshape(-1, 1) if A.ndim == 1 else A
@@ -46,6 +69,26 @@ def procrustes(truth: np.ndarray, embedding: np.ndarray) -> ProcrustesResult:
 
 
 def procrustes_error(truth: np.ndarray, embedding: np.ndarray) -> float:
+    """Procrustes disparity of `embedding` against `truth` (Eq 3.3-3.10): 0 for a perfect shape.
+
+    Parameters
+    ----------
+    truth : np.ndarray
+        Ground-truth positions [n, d].
+    embedding : np.ndarray
+        Coordinates [n, k] of the same points, in the same order.
+
+    Returns
+    -------
+    float
+        Sum of squared differences after the best similarity transform, in [0, 1].
+
+    Examples
+    --------
+    Scale, rotation and translation do not count::
+
+        procrustes_error(truth, 3.0 * truth @ rotation + 1.0)  # ~0.0: the same shape
+    """
     return procrustes(truth, embedding).disparity
 
 
@@ -58,6 +101,7 @@ class SimilarityTransform:
     translation: np.ndarray
 
     def apply(self, X: np.ndarray) -> np.ndarray:
+        """Map the rows of `X` through the transform."""
         return self.scale * np.asarray(X, dtype=np.float64) @ self.rotation + self.translation
 
 

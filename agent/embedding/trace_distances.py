@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 from sensorimotor.agent.embedding import trace_kernels as K
 
@@ -85,9 +86,37 @@ def trace_distances(
     kind: str = "continuous",
     pad: str = "append",
     substitution_cost: int = 1,
-    dtype: type = np.float64,
+    dtype: DTypeLike = np.float64,
 ) -> np.ndarray:
-    """The n x n matrix of pairwise trace distances (zero diagonal, symmetric)."""
+    """The n x n matrix of pairwise trace distances (zero diagonal, symmetric).
+
+    Parameters
+    ----------
+    traces : sequence
+        Continuous traces (each [L_i, action_dims] or [L_i]) or, for "edit", sequences of action
+        indices.
+    kind : {"continuous", "edit", "dtw"}, default "continuous"
+        Padded sum of per-step Euclidean distances (a metric), edit distance of action indices,
+        or dynamic time warping (not a metric).
+    pad : {"append", "prepend"}, default "append"
+        Where the shorter continuous trace gets its zero actions.
+    substitution_cost : int, default 1
+        Edit-distance cost of a substitution (2: the indel/LCS distance).
+    dtype : dtype-like, default np.float64
+        Element type of the result (`np.float32` halves its memory).
+
+    Returns
+    -------
+    np.ndarray
+        [n, n] distances.
+
+    Examples
+    --------
+    Indel distances between three discrete traces::
+
+        D = trace_distances([[0, 0, 1], [0, 1], [1]], kind="edit", substitution_cost=2)
+        # D[0, 2] == 2.0: two deletions turn [0, 0, 1] into [1]
+    """
     _check_kind(kind)
     if kind == "edit":
         return _edit(traces, traces, substitution_cost, np.dtype(dtype))
@@ -109,7 +138,7 @@ def trace_cross_distances(
     kind: str = "continuous",
     pad: str = "append",
     substitution_cost: int = 1,
-    dtype: type = np.float64,
+    dtype: DTypeLike = np.float64,
 ) -> np.ndarray:
     """Distances from each trace in `a` to each trace in `b`: [len(a), len(b)]."""
     _check_kind(kind)
@@ -156,10 +185,12 @@ def update_trace_distances(
 
 
 def continuous_trace_distances(traces: Sequence[np.ndarray], pad: str = "append") -> np.ndarray:
+    """`trace_distances` of continuous traces (padded sum of per-step distances)."""
     return trace_distances(traces, "continuous", pad)
 
 
 def edit_trace_distances(traces: Sequence[Sequence[int]], substitution_cost: int = 1) -> np.ndarray:
+    """`trace_distances` of discrete traces (edit distance of action indices)."""
     return trace_distances(traces, "edit", substitution_cost=substitution_cost)
 
 
@@ -190,7 +221,9 @@ class PreparedTraces:
             sub._X, sub._lens = np.ascontiguousarray(self._X[rows]), self._lens[rows]
         return sub
 
-    def distances_to(self, idx: np.ndarray, rows: np.ndarray | None = None, dtype: type = np.float64) -> np.ndarray:
+    def distances_to(
+        self, idx: np.ndarray, rows: np.ndarray | None = None, dtype: DTypeLike = np.float64
+    ) -> np.ndarray:
         """[len(rows) or n, len(idx)]: the traces at `rows` (default all) against those at `idx`."""
         idx = np.asarray(idx, dtype=np.int64)
         if self.kind == "edit":

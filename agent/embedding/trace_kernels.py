@@ -21,6 +21,7 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 
 def padded_sum_pairs_numpy(X: np.ndarray, out: np.ndarray) -> None:
+    """Reference of `padded_sum_pairs` (numpy)."""
     out[:] = 0
     for t in range(X.shape[1]):
         step = X[:, t, :]
@@ -30,12 +31,14 @@ def padded_sum_pairs_numpy(X: np.ndarray, out: np.ndarray) -> None:
 
 
 def padded_sum_cross_numpy(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
+    """Reference of `padded_sum_cross` (numpy)."""
     out[:] = 0
     for t in range(A.shape[1]):
         out += cdist(A[:, t, :], B[:, t, :]).astype(out.dtype, copy=False)
 
 
 def dtw_numpy(a: np.ndarray, b: np.ndarray) -> float:
+    """Reference DTW distance of two unpadded traces [la, d] and [lb, d] (numpy)."""
     n, m = len(a), len(b)
     if n == 0 or m == 0:
         return float(np.linalg.norm(a, axis=1).sum() + np.linalg.norm(b, axis=1).sum())
@@ -136,6 +139,7 @@ if HAVE_NUMBA:
 
 
 def padded_sum_pairs(X: np.ndarray, out: np.ndarray) -> None:
+    """Fill `out` [n, n] with the padded-sum distances between the traces of X [n, L, d]."""
     if HAVE_NUMBA:
         _padded_sum_pairs(np.ascontiguousarray(X, dtype=np.float64), out)
     else:
@@ -143,6 +147,7 @@ def padded_sum_pairs(X: np.ndarray, out: np.ndarray) -> None:
 
 
 def padded_sum_cross(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
+    """Fill `out` [na, nb] with the padded-sum distances from the traces of A to those of B."""
     if HAVE_NUMBA:
         _padded_sum_cross(np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(B, dtype=np.float64), out)
     else:
@@ -152,6 +157,7 @@ def padded_sum_cross(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
 def dtw_cross(
     A: np.ndarray, la: np.ndarray, B: np.ndarray, lb: np.ndarray, out: np.ndarray, symmetric: bool = False
 ) -> None:
+    """Fill `out` with the DTW distances from A to B (true lengths la, lb); `symmetric` when A is B."""
     if HAVE_NUMBA:
         _dtw_cross(
             np.ascontiguousarray(A, dtype=np.float64),

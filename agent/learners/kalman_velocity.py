@@ -12,6 +12,18 @@ from filterpy.kalman import KalmanFilter
 
 
 class VelocityFilter:
+    """Constant-velocity Kalman filter over a scalar position: (position, velocity) estimates.
+
+    Parameters
+    ----------
+    dt : float, default 1.0
+        Time between measurements.
+    measurement_var : float, default 1e-3
+        Variance of a position measurement.
+    process_var : float, default 1e-5
+        Process-noise variance (white acceleration), see the module docstring.
+    """
+
     def __init__(self, dt: float = 1.0, measurement_var: float = 1e-3, process_var: float = 1e-5) -> None:
         if dt <= 0 or measurement_var <= 0 or process_var <= 0:
             raise ValueError("dt, measurement_var and process_var must be > 0")
@@ -19,6 +31,7 @@ class VelocityFilter:
         self.reset()
 
     def reset(self, position: float | None = None) -> None:
+        """Start over at `position` (0 when None) with zero velocity and the initial covariance."""
         kf = KalmanFilter(dim_x=2, dim_z=1)
         kf.F = np.array([[1.0, self.dt], [0.0, 1.0]])
         kf.H = np.array([[1.0, 0.0]])

@@ -8,10 +8,29 @@ Features come from a basis with `k` and `phi(states, actions) -> (n, k)` (dense 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import scipy.sparse as sp
+
+
+class Basis(Protocol):
+    """What LSPI needs of a linear architecture: `k` features per (state, action) pair over
+    `n_actions` actions, and `phi(states, actions)` -> feature rows [n, k] (dense or scipy sparse)."""
+
+    @property
+    def k(self) -> int:
+        """Number of features per (state, action) pair."""
+        ...
+
+    @property
+    def n_actions(self) -> int:
+        """Number of discrete actions."""
+        ...
+
+    def phi(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray | sp.csr_matrix:
+        """Feature rows [n, k] of the pairs (states[i], actions[i])."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -23,9 +42,11 @@ class TabularBasis:
 
     @property
     def k(self) -> int:
+        """Number of features: n_states * n_actions."""
         return self.n_states * self.n_actions
 
     def phi(self, states: np.ndarray, actions: np.ndarray) -> sp.csr_matrix:
+        """Sparse one-hot rows [n, k] for the (state, action) pairs."""
         states = np.asarray(states, dtype=np.int64).reshape(-1)
         actions = np.asarray(actions, dtype=np.int64).reshape(-1)
         if states.size and (states.min() < 0 or states.max() >= self.n_states):
@@ -45,9 +66,11 @@ class RBFBasis:
 
     @property
     def k(self) -> int:
+        """Number of features: (len(centres) + 1) * n_actions."""
         return (len(self.centres) + 1) * self.n_actions
 
     def phi(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """Dense rows [n, k]: the RBF block (and constant) of each state in its action's columns."""
         x = np.asarray(states, dtype=np.float64).reshape(-1, 1)
         a = np.asarray(actions, dtype=np.int64).reshape(-1)
         f = np.hstack([np.ones((x.shape[0], 1)), np.exp(-0.5 * ((x - np.asarray(self.centres)) / self.width) ** 2)])
@@ -60,9 +83,34 @@ class RBFBasis:
 
 
 class LSPI:
+    """Least-squares policy iteration over a linear basis (see the module docstring).
+
+    Parameters
+    ----------
+    basis : Basis
+        The features, e.g. `TabularBasis` (integer states) or `RBFBasis` (scalar states).
+    gamma : float, default 0.9
+        Discount, in [0, 1).
+    ridge : float, default 1e-3
+        Ridge term added to the LSTD-Q matrix (keeps it invertible; perturbs exact ties slightly).
+    capacity : int, default 50_000
+        Samples kept; the oldest are dropped beyond it.
+    tie_tolerance : float, default 0.05
+        Relative tolerance within which actions count as tied in `greedy`.
+
+    Examples
+    --------
+    Learn from samples, iterate, act greedily::
+
+        lspi = LSPI(TabularBasis(n_states=25, n_actions=4), gamma=0.9)
+        lspi.learn_one(s, a, r, s_next, done)  # for each observed step
+        lspi.iterate()  # one policy-iteration step over all stored samples
+        a = lspi.greedy(s)
+    """
+
     def __init__(
         self,
-        basis: TabularBasis,
+        basis: Basis,
         gamma: float = 0.9,
         ridge: float = 1e-3,
         capacity: int = 50_000,
@@ -82,10 +130,11 @@ class LSPI:
         self.reset()
 
     def reset(self) -> None:
-        self._s: list[int] = []
+        """Forget every sample and set the weights to zero."""
+        self._s: list[float] = []
         self._a: list[int] = []
         self._r: list[float] = []
-        self._s2: list[int] = []
+        self._s2: list[float] = []
         self._done: list[bool] = []
         self.w = np.zeros(self.basis.k)
         self.iterations = 0
@@ -117,9 +166,25 @@ class LSPI:
 
     @property
     def n_samples(self) -> int:
+        """Number of samples stored."""
         return len(self._s)
 
-    def learn_one(self, s: int, a: int, r: float, s_next: int, done: bool) -> None:
+    def learn_one(self, s: float, a: int, r: float, s_next: float, done: bool) -> None:
+        """Store one sample (s, a, r, s', done); learning happens in `iterate`.
+
+        Parameters
+        ----------
+        s : float
+            State as the basis takes it (a state id for `TabularBasis`, a scalar for `RBFBasis`).
+        a : int
+            Action taken.
+        r : float
+            Reward received.
+        s_next : float
+            The next state.
+        done : bool
+            Whether `s_next` is terminal (its value then counts as 0).
+        """
         self._s.append(s)
         self._a.append(int(a))
         self._r.append(float(r))
@@ -129,16 +194,32 @@ class LSPI:
             for buf in (self._s, self._a, self._r, self._s2, self._done):
                 del buf[0]
 
-    def q(self, s: int) -> np.ndarray:
+    def q(self, s: float) -> np.ndarray:
+        """Q(s, a) for every action a: [n_actions]."""
         n = self.basis.n_actions
         return np.asarray(self.basis.phi(np.full(n, s), np.arange(n)) @ self.w).reshape(-1)
 
-    def greedy(self, s: int, prefer: int | None = None) -> int:
-        """argmax_a Q(s, a); among near-ties (within `tie_tolerance` of the best, relative), keep
-        `prefer` (e.g. the previous action) if it is one of them, else the lowest index. Consistent
-        tie-breaking gives consistent traces, which the embedding needs. The tolerance is relative
-        because with goal rewards the gap between an optimal and a detour action is the fixed
-        fraction 1 - gamma^2 of the value, while the ridge term perturbs exact ties slightly."""
+    def greedy(self, s: float, prefer: int | None = None) -> int:
+        """The greedy action argmax_a Q(s, a), with consistent tie-breaking.
+
+        Among near-ties (within `tie_tolerance` of the best, relative), keep `prefer` (e.g. the
+        previous action) if it is one of them, else the lowest index. Consistent tie-breaking gives
+        consistent traces, which the embedding needs. The tolerance is relative because with goal
+        rewards the gap between an optimal and a detour action is the fixed fraction 1 - gamma^2 of
+        the value, while the ridge term perturbs exact ties slightly.
+
+        Parameters
+        ----------
+        s : float
+            State as the basis takes it.
+        prefer : int, optional
+            Action to keep when it is among the near-ties.
+
+        Returns
+        -------
+        int
+            The chosen action.
+        """
         return self.choose(self.q(s), prefer)
 
     def choose(self, q: np.ndarray, prefer: int | None = None) -> int:
@@ -169,7 +250,8 @@ class LSPI:
         A2 = self._greedy_many(S2)
         Phi = self.basis.phi(S, A)
         Phi2 = self.basis.phi(S2, A2)
-        Phi2 = Phi2.multiply((~done)[:, None]).tocsr() if sp.issparse(Phi2) else Phi2 * (~done)[:, None]
+        # dense features (RBFBasis) are an ndarray, sparse ones (TabularBasis) scipy sparse: mask terminal rows
+        Phi2 = Phi2 * (~done)[:, None] if isinstance(Phi2, np.ndarray) else Phi2.multiply((~done)[:, None]).tocsr()
         Amat = Phi.T @ (Phi - self.gamma * Phi2)
         Amat = Amat.toarray() if sp.issparse(Amat) else np.asarray(Amat)
         b = np.asarray(Phi.T @ R).reshape(-1)

@@ -31,6 +31,29 @@ EXPLORATION = ("relearn", "gamma", "gaussian")
 
 
 class SaccadeLearner:
+    """The factored saccade learner of ch. 4: per receptive field a preferred saccade and a reward
+    estimate (see the module docstring for the rules and exploration).
+
+    Parameters
+    ----------
+    n_fields : int
+        Number of receptive fields.
+    low, high : np.ndarray
+        Bounds of the saccade (action) box, 1-D, high > low.
+    alpha : float, default 0.5
+        Learning rate, in (0, 1].
+    noise_sd : float, optional
+        Exploration noise sd in action units (default: 0.075 x the mean action range).
+    rule : {"robust", "basic"}, default "robust"
+        Update rule (Eq 4.7 or Eq 4.4-4.5).
+    exploration : {"relearn", "gamma", "gaussian"}, default "relearn"
+        Exploration mode.
+    init_spread : float, default 1.0
+        Initial preferences are uniform over the box scaled by this, in [0, 1].
+    seed : int, default 0
+        Seed of the learner's generator.
+    """
+
     def __init__(
         self,
         n_fields: int,
@@ -70,6 +93,7 @@ class SaccadeLearner:
     REF_RATE = 0.02
 
     def reset(self) -> None:
+        """Back to the initial (seeded, random) preferences and zero reward estimates."""
         self.rng = np.random.default_rng(self.seed)
         self.pi = self.rng.uniform(self.low, self.high, (self.n_fields, self.low.size)) * self.init_spread
         self.R = np.zeros(self.n_fields)
@@ -113,6 +137,7 @@ class SaccadeLearner:
         self.relearning = True
 
     def end_relearning(self) -> None:
+        """The reward has settled after a drop: stop the extra (gamma) exploration."""
         self.relearning = False
 
     @property
@@ -121,7 +146,19 @@ class SaccadeLearner:
         return -self.pi
 
     def greedy(self, delta: np.ndarray) -> np.ndarray:
-        """pi*(s) (Eq 4.3); the centre of the action box when nothing is active."""
+        """pi*(s) (Eq 4.3): the activation-weighted mean of the fields' preferences; the centre of the
+        action box when nothing is active.
+
+        Parameters
+        ----------
+        delta : np.ndarray
+            Pre-saccade field activations [n_fields].
+
+        Returns
+        -------
+        np.ndarray
+            The saccade, [action dims].
+        """
         d = np.asarray(delta, dtype=np.float64)
         s = d.sum()
         if s <= 1e-12:
@@ -129,11 +166,24 @@ class SaccadeLearner:
         return d @ self.pi / s
 
     def expected_reward(self, delta: np.ndarray) -> float:
+        """r_a: the activation-weighted mean reward estimate of the active fields (0 if none)."""
         d = np.asarray(delta, dtype=np.float64)
         s = d.sum()
         return float(d @ self.R / s) if s > 1e-12 else 0.0
 
     def act(self, delta: np.ndarray) -> np.ndarray:
+        """The saccade to make: `greedy` plus exploration, clipped to the action box.
+
+        Parameters
+        ----------
+        delta : np.ndarray
+            Pre-saccade field activations [n_fields].
+
+        Returns
+        -------
+        np.ndarray
+            The saccade, [action dims].
+        """
         a = self.greedy(delta)
         if self.exploration == "gamma" or (self.exploration == "relearn" and self.relearning):
             gamma = 0.0 if self.r_ref <= 0 else float(np.clip(self.expected_reward(delta) / self.r_ref, 0.0, 1.0))
@@ -142,6 +192,17 @@ class SaccadeLearner:
         return np.clip(a, self.low, self.high)
 
     def learn_one(self, delta: np.ndarray, action: np.ndarray, reward: float) -> None:
+        """Learn from one saccade: update reward estimates and preferences of the active fields.
+
+        Parameters
+        ----------
+        delta : np.ndarray
+            Pre-saccade field activations [n_fields] (the same as given to `act`).
+        action : np.ndarray
+            The saccade made.
+        reward : float
+            The post-saccade reward (finite).
+        """
         d = np.asarray(delta, dtype=np.float64)
         a = np.asarray(action, dtype=np.float64)
         if d.shape != (self.n_fields,) or a.shape != self.low.shape:

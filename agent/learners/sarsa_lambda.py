@@ -10,12 +10,25 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from sensorimotor.agent.snapshot import rng_state, set_rng_state
 
 
 class TileCoder:
-    def __init__(self, low: np.ndarray, high: np.ndarray, tiles: int = 10, n_tilings: int = 8) -> None:
+    """Tile coding (CMAC) of a box: `n_tilings` offset grids, `tiles` cells per dimension.
+
+    Parameters
+    ----------
+    low, high : array-like
+        Bounds of the state box (states outside are clipped to it).
+    tiles : int, default 10
+        Cells per dimension and tiling.
+    n_tilings : int, default 8
+        Number of offset tilings (one active tile each).
+    """
+
+    def __init__(self, low: ArrayLike, high: ArrayLike, tiles: int = 10, n_tilings: int = 8) -> None:
         self.low, self.high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         if self.low.shape != self.high.shape or not (self.high > self.low).all():
             raise ValueError("low/high must have the same shape and high > low")
@@ -38,6 +51,26 @@ class TileCoder:
 
 
 class SarsaLambda:
+    """Sarsa(lambda) with linear function approximation over a `TileCoder`, replacing traces.
+
+    Parameters
+    ----------
+    coder : TileCoder
+        The state features.
+    n_actions : int
+        Number of discrete actions.
+    alpha : float, default 0.3
+        Step size (divided among the tilings), in (0, 1].
+    gamma : float, default 0.99
+        Discount.
+    lam : float, default 0.9
+        Trace decay lambda.
+    epsilon : float, default 0.0
+        Probability of a random action in `act`.
+    seed : int, default 0
+        Seed of the learner's generator.
+    """
+
     def __init__(
         self,
         coder: TileCoder,
@@ -56,6 +89,7 @@ class SarsaLambda:
         self.reset()
 
     def reset(self) -> None:
+        """Zero weights and traces, and reseed the generator."""
         self.rng = np.random.default_rng(self.seed)
         self.w = np.zeros((self.n_actions, self.coder.size))
         self.z = np.zeros_like(self.w)
@@ -74,9 +108,22 @@ class SarsaLambda:
         self.w, self.z = w, z
 
     def q(self, state: np.ndarray) -> np.ndarray:
+        """Q(state, a) for every action: [n_actions]."""
         return self.w[:, self.coder.active(state)].sum(axis=1)
 
     def act(self, state: np.ndarray) -> int:
+        """Epsilon-greedy action for `state` (ties broken at random): for learning.
+
+        Parameters
+        ----------
+        state : np.ndarray
+            The continuous state (e.g. position, velocity).
+
+        Returns
+        -------
+        int
+            The action.
+        """
         if self.rng.random() < self.epsilon:
             return int(self.rng.integers(self.n_actions))
         q = self.q(state)
@@ -84,15 +131,41 @@ class SarsaLambda:
         return int(best[self.rng.integers(best.size)])
 
     def greedy(self, state: np.ndarray) -> int:
-        """The best action, ties to the lowest index: deterministic, for evaluation."""
+        """The best action, ties to the lowest index: deterministic, for evaluation.
+
+        Parameters
+        ----------
+        state : np.ndarray
+            The continuous state.
+
+        Returns
+        -------
+        int
+            The action.
+        """
         q = self.q(state)
         return int(np.flatnonzero(q == q.max())[0])
 
     def begin_episode(self) -> None:
+        """Clear the eligibility traces at the start of an episode."""
         self.z[:] = 0.0
 
     def learn_one(self, s: np.ndarray, a: int, r: float, s2: np.ndarray, a2: int | None) -> None:
-        """One Sarsa(lambda) update; `a2 = None` when s2 is terminal."""
+        """One Sarsa(lambda) update for the step (s, a, r, s2, a2).
+
+        Parameters
+        ----------
+        s : np.ndarray
+            State the action was taken in.
+        a : int
+            Action taken.
+        r : float
+            Reward received.
+        s2 : np.ndarray
+            The next state.
+        a2 : int or None
+            Action chosen in `s2`; None when `s2` is terminal (its value counts as 0).
+        """
         tiles = self.coder.active(s)
         target = r + (0.0 if a2 is None else self.gamma * self.q(s2)[a2])
         delta = target - self.w[a, tiles].sum()

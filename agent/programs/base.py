@@ -89,6 +89,7 @@ class Program(abc.ABC):
 
     name = "program"
     Params: ClassVar[type] = EchoParams
+    params: Any  # the parsed `Params` instance the program was made with (set by each constructor)
     # settings for the daemon's drop detector that suit this program's `performance` stream, e.g. a
     # shorter warm-up for one value per episode than for one per step
     detector_params: dict[str, Any] = {}
@@ -109,6 +110,7 @@ class Program(abc.ABC):
         return out
 
     def emit(self, item: Any) -> None:
+        """Queue an `EmbeddingOutput` or `EventOutput` for the link (see `drain`)."""
         self._outbox.append(item)
 
     def world_restarted(self) -> None:
@@ -145,4 +147,5 @@ class EchoProgram(Program):
         self.params = parse(EchoParams, overrides, name=self.name, base=params)
 
     def act(self, obs: Observation) -> Decision:
+        """Action 0, whatever the observation."""
         return Decision((0.0,))

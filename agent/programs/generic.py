@@ -149,6 +149,7 @@ class GenericProgram(Program):
 
     name = "generic"
     Params = GenericProgramParams
+    _rbf: _RBFFeatures  # the LSPI basis when observations are not state ids
     detector_params = {"warmup": 30, "rate": 0.05}
 
     def __init__(
@@ -183,7 +184,7 @@ class GenericProgram(Program):
             self._proj = proj_rng.standard_normal((d, self.dim)) / np.sqrt(self.dim) if d > prm.projection else None
             self._store = np.zeros((2 * prm.max_samples + 2, self.dim), dtype=np.float32)
             self._reservoir = np.zeros((prm.reservoir, self.dim), dtype=np.float32)
-            basis = _RBFFeatures(self._store, self.n_actions, prm.centres)
+            self._rbf = basis = _RBFFeatures(self._store, self.n_actions, prm.centres)
         self._next_id = 0
         self._seen = 0
         self._fitted_at = 0
@@ -221,7 +222,7 @@ class GenericProgram(Program):
         i = self._next_id
         self._next_id += 1
         self._store[i % self._store.shape[0]] = x
-        self.lspi.basis.forget(i % self._store.shape[0])
+        self._rbf.forget(i % self._store.shape[0])
         self._seen += 1  # reservoir sampling: every observation seen is equally likely to be kept
         r = self._reservoir.shape[0]
         if self._seen <= r:
@@ -236,7 +237,7 @@ class GenericProgram(Program):
         w = self.lspi.w.reshape(self.n_actions, -1)
         if self.tabular:
             return self.lspi.q(self._state(obs))
-        f = self.lspi.basis.features(self._vector(obs))[0]
+        f = self._rbf.features(self._vector(obs))[0]
         return w @ f
 
     # the program -------------------------------------------------------------------------------
@@ -245,7 +246,7 @@ class GenericProgram(Program):
         if not self.tabular and self._seen >= 2 * self._fitted_at:
             # refit while experience still doubles; later fits would only reshuffle a settled basis
             n = min(self._seen, self._reservoir.shape[0])
-            self.lspi.basis.fit(self._reservoir[:n].astype(np.float64), prm.components, prm.centres, prm.width)
+            self._rbf.fit(self._reservoir[:n].astype(np.float64), prm.components, prm.centres, prm.width)
             self._fitted_at = self._seen
         change = 0.0
         for _ in range(prm.lspi_iterations):  # policy iteration until the weights settle
@@ -399,7 +400,7 @@ class GenericProgram(Program):
             "watching": self._watching,
         }
         if not self.tabular:
-            b = self.lspi.basis
+            b = self._rbf
             out.update(
                 store=self._store.copy(),
                 reservoir=self._reservoir.copy(),
@@ -429,7 +430,7 @@ class GenericProgram(Program):
         if not self.tabular:
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
-            b, s = self.lspi.basis, state["basis"]
+            b, s = self._rbf, state["basis"]
             b.mean, b.axes, b.scale = (np.array(s[k], dtype=np.float64) for k in ("mean", "axes", "scale"))
             b.centres, b.width = np.array(s["centres"], dtype=np.float64), float(s["width"])
             b.forget(slice(None))

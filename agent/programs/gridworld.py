@@ -38,6 +38,13 @@ class GridworldProgramParams:
 
 
 class GridworldProgram(Program):
+    """The gridworld program (ch. 5): LSPI toward the goal, 2-D embedding of greedy traces.
+
+    Built by `make_program` as `GridworldProgram(spec, seed, params=None, **overrides)`; the
+    hyperparameters are `GridworldProgramParams`. Needs discrete actions, an integer "state"
+    sensor and >= 3 start states.
+    """
+
     name = "gridworld"
     Params = GridworldProgramParams
 
@@ -126,6 +133,7 @@ class GridworldProgram(Program):
 
     # the program -------------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
+        """Explore (storing LSPI samples) or sweep the start states with the greedy policy and embed."""
         s = self._state(obs)
         if self.phase == "explore":
             if obs.t > 0 and self._prev is not None:
@@ -163,6 +171,7 @@ class GridworldProgram(Program):
 
     # saved state ---------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
+        """The base snapshot plus LSPI, phase, sweep and traces (see `agent.programs.base`)."""
         return {
             **super().state(),
             "lspi": self.lspi.state(),
@@ -177,6 +186,7 @@ class GridworldProgram(Program):
         }
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a program built with the same spec and params."""
         super().restore(state)
         self.lspi.restore(state["lspi"])
         self.phase, self.new_samples, self.version = (
@@ -192,6 +202,7 @@ class GridworldProgram(Program):
         self._D = array_or_none(state["D"])
 
     def world_restarted(self) -> None:
+        """Drop the pending sample and restart the trace in progress."""
         self._prev = None
         self._sweep.interrupted()
         self._seen = set()

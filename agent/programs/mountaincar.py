@@ -73,12 +73,21 @@ class MountainCarProgramParams:
 
 
 class MountainCarProgram(Program):
+    """The visual mountain car (ch. 8): vergence geometry first, then Sarsa(lambda) driving on it.
+
+    Built by `make_program` as `MountainCarProgram(spec, seed, params=None, **overrides)`; the
+    hyperparameters are `MountainCarProgramParams`. Needs 5 discrete actions (converge, diverge,
+    reverse, coast, forward), sensors "left" and "right", and spec params `n_positions` (sweep
+    states) and `n_eval` (evaluation states).
+    """
+
     name = "mountaincar"
     # one value per training episode: a short warm-up, and a reference that follows an improving
     # driver within some 20 episodes
     detector_params = {"warmup": 20, "rate": 0.05}
 
     Params = MountainCarProgramParams
+    params: MountainCarProgramParams
 
     def __init__(
         self, spec: WorldSpec, seed: int = 0, params: MountainCarProgramParams | None = None, **overrides: Any
@@ -91,15 +100,8 @@ class MountainCarProgram(Program):
             prm.vergence_gamma,
             prm.ridge,
         )
-        max_trace, alpha, gamma, lam, tiles, n_tilings = (
-            prm.max_trace,
-            prm.alpha,
-            prm.gamma,
-            prm.lam,
-            prm.tiles,
-            prm.n_tilings,
-        )
-        drive_epsilon, eval_every, n_eval, watch_after = prm.drive_epsilon, prm.eval_every, prm.n_eval, prm.watch_after
+        max_trace = prm.max_trace  # the driver's settings (alpha ... drive_epsilon) are read from self.params
+        eval_every, n_eval, watch_after = prm.eval_every, prm.n_eval, prm.watch_after
         report_after, process_var = prm.report_after, prm.process_var
         if not spec.action_space.discrete or spec.action_space.n != 5:
             raise SpecMismatch(
@@ -124,9 +126,6 @@ class MountainCarProgram(Program):
         self.lspi = LSPI(
             RBFBasis(tuple(float(c) for c in np.linspace(0.0, 0.3, 13)), 0.025, 2), gamma=vergence_gamma, ridge=ridge
         )
-        self._sarsa_args = dict(
-            alpha=alpha, gamma=gamma, lam=lam, tiles=tiles, n_tilings=n_tilings, epsilon=drive_epsilon
-        )
         self.sarsa: SarsaLambda | None = None
         self.practice = VergencePractice(self.lspi, self.rng, samples_per_iteration, epsilon)
         self.phase = "explore"
@@ -134,7 +133,7 @@ class MountainCarProgram(Program):
         self._sweep = StartStateSweep(self.n_positions, max_trace)
         # the embedding: landmark traces, MDS model, alignment to the first embedding
         self.landmarks: list[list[int]] = []
-        self._model = None
+        self._model: MDSModel | None = None
         self._align: SimilarityTransform | None = None
         self._coords0: np.ndarray | None = None
         self._positions: dict[tuple[int, ...], float] = {}
@@ -153,6 +152,7 @@ class MountainCarProgram(Program):
         self._perf: float | None = None
         self._eval_i = 0
         self._eval_steps: list[int] = []
+        self._eval_reached: list[bool] = []
         self.curve: list[tuple[int, float]] = []
         self.episode_log: list[tuple[int, int]] = []  # (training steps at the end, car steps) per training episode
         self.relearn_at: int | None = None
@@ -189,7 +189,7 @@ class MountainCarProgram(Program):
         mds = classical_mds(D, 1)
         coords = mds.coordinates
         relearned = self._coords0 is not None
-        if relearned:
+        if self._coords0 is not None:
             # the same start states as the first embedding: keep the coordinates Sarsa learned in
             self._align = fit_similarity(self._coords0, coords)
             coords = self._align.apply(coords)
@@ -223,6 +223,7 @@ class MountainCarProgram(Program):
         key = tuple(trace)
         p = self._positions.get(key)
         if p is None:
+            assert self._model is not None, "positions are read once the first embedding is made"
             d = trace_cross_distances([list(trace)], self.landmarks, kind="edit", substitution_cost=2)
             y = self._model.transform(d)
             if self._align is not None:
@@ -232,16 +233,18 @@ class MountainCarProgram(Program):
 
     # stage 2: driving ----------------------------------------------------------------------------
     def _make_driver(self, lo: float, hi: float) -> None:
-        a = self._sarsa_args
+        prm = self.params
         margin = 0.1 * (hi - lo)
         vmax = 0.04 * (hi - lo)  # the car crosses its track in no fewer than ~25 steps
-        coder = TileCoder([lo - margin, -vmax], [hi + margin, vmax], tiles=a["tiles"], n_tilings=a["n_tilings"])
+        coder = TileCoder([lo - margin, -vmax], [hi + margin, vmax], tiles=prm.tiles, n_tilings=prm.n_tilings)
         self.sarsa = self._sarsa(coder, int(self.rng.integers(2**31)))
         self._kf = self._filter()
 
     def _sarsa(self, coder: TileCoder, seed: int) -> SarsaLambda:
-        a = self._sarsa_args
-        return SarsaLambda(coder, 3, alpha=a["alpha"], gamma=a["gamma"], lam=a["lam"], epsilon=a["epsilon"], seed=seed)
+        prm = self.params
+        return SarsaLambda(
+            coder, 3, alpha=prm.alpha, gamma=prm.gamma, lam=prm.lam, epsilon=prm.drive_epsilon, seed=seed
+        )
 
     def _filter(self) -> VelocityFilter:
         """Measurement noise: a position is quantised to one vergence step (uniform, variance q^2/12)."""
@@ -249,6 +252,7 @@ class MountainCarProgram(Program):
 
     @property
     def evaluating(self) -> bool:
+        """Whether learning is halted for an evaluation run."""
         return self.phase == "evaluate"
 
     def _start_training_episode(self) -> None:
@@ -275,11 +279,12 @@ class MountainCarProgram(Program):
             return self._episode_over(obs)
         p = self.position(self._trace)
         self._trace = None
+        sarsa, kf = self.sarsa, self._kf
+        assert sarsa is not None and kf is not None, "the driver is made with the first embedding"
         if self._s is None:
-            self._kf.reset(p)
-        pos, vel = self._kf.update(p)
+            kf.reset(p)
+        pos, vel = kf.update(p)
         s = np.array([pos, vel])
-        sarsa = self.sarsa
         if self.evaluating:
             a = sarsa.greedy(s)
         else:
@@ -324,6 +329,7 @@ class MountainCarProgram(Program):
             self._start_training_episode()
             return Decision(reset=True, start=-1)
         if reached and self._s is not None:
+            assert self.sarsa is not None, "a state was driven from, so the driver exists"
             self.sarsa.learn_one(self._s, self._a, -1.0, self._s, None)
         return self._end_training_episode()
 
@@ -353,6 +359,7 @@ class MountainCarProgram(Program):
 
     # Program interface ---------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
+        """Dispatch to the current stage: explore, sweep (then embed), or drive/evaluate."""
         if self.phase == "explore":
             return self._explore(obs, foveal_difference(obs))
         if self.phase == "sweep":
@@ -360,6 +367,7 @@ class MountainCarProgram(Program):
         return self._drive(obs)
 
     def performance(self, obs: Observation) -> float | None:
+        """-(car steps) / report_after of a training episode that just ended, once; else None."""
         out, self._perf = self._perf, None
         return out
 
@@ -381,6 +389,7 @@ class MountainCarProgram(Program):
         and seed it was built from, so `restore` rebuilds it the same way."""
         driver = None
         if self.sarsa is not None:
+            assert self._kf is not None, "Sarsa and the velocity filter are made together"
             driver = {
                 "low": self.sarsa.coder.low.copy(),
                 "high": self.sarsa.coder.high.copy(),
@@ -425,13 +434,15 @@ class MountainCarProgram(Program):
             "perf": self._perf,
             "eval_i": self._eval_i,
             "eval_steps": list(self._eval_steps),
-            "eval_reached": list(getattr(self, "_eval_reached", [])),
+            "eval_reached": list(self._eval_reached),
             "curve": [list(c) for c in self.curve],
             "episode_log": [list(e) for e in self.episode_log],
             "relearn_at": self.relearn_at,
         }
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a program built with the same spec and params; the
+        driver is rebuilt from its saved bounds and seed."""
         super().restore(state)
         self.lspi.restore(state["lspi"])
         self.practice.restore(state["practice"])
@@ -458,8 +469,8 @@ class MountainCarProgram(Program):
             coder = TileCoder(
                 np.array(driver["low"]),
                 np.array(driver["high"]),
-                tiles=self._sarsa_args["tiles"],
-                n_tilings=self._sarsa_args["n_tilings"],
+                tiles=self.params.tiles,
+                n_tilings=self.params.n_tilings,
             )
             self.sarsa = self._sarsa(coder, int(driver["sarsa"]["seed"]))
             self.sarsa.restore(driver["sarsa"])
@@ -478,6 +489,7 @@ class MountainCarProgram(Program):
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
 
     def world_restarted(self) -> None:
+        """Drop the pending vergence sample and restart the trace and episode in progress."""
         self.practice.reset()
         self._sweep.interrupted()
         self._start_training_episode()

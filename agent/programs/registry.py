@@ -25,9 +25,11 @@ class ProgramKind:
     summary: str
 
     def program_class(self) -> type[Program]:
+        """The Program class (imports its module)."""
         return getattr(importlib.import_module(f"sensorimotor.agent.programs.{self.module}"), self.cls)
 
     def params_type(self) -> type:
+        """The program's parameter dataclass (imports its module)."""
         return getattr(importlib.import_module(f"sensorimotor.agent.programs.{self.module}"), self.params)
 
 
@@ -105,6 +107,35 @@ def resolve_program(spec: WorldSpec) -> str:
 
 
 def make_program(spec: WorldSpec, seed: int = 0, **kw: Any) -> Program:
-    """The program for `spec` (see `resolve_program`), with hyperparameters `kw` (strings or typed
-    values, validated against that program's declaration)."""
+    """The program for a world spec (see `resolve_program`), built with its seed and hyperparameters.
+
+    Parameters
+    ----------
+    spec : WorldSpec
+        The world; its `program` hint (else its `kind`) names the program in `PROGRAMS`; a name
+        the agent does not have gets the generic program.
+    seed : int, default 0
+        Seed of the program's random generator (programs are deterministic given it).
+    **kw
+        Hyperparameters of that program (strings or typed values), validated against its
+        `Params` dataclass.
+
+    Returns
+    -------
+    Program
+        A fresh program.
+
+    Raises
+    ------
+    ValueError
+        `ParamError` for an unknown or invalid parameter;
+        `SpecMismatch` if the world's sensors or actions do not suit the program.
+
+    Examples
+    --------
+    ::
+
+        program = make_program(spec, seed=0, samples_per_iteration="300")
+        decision = program.act(observation)
+    """
     return PROGRAMS[resolve_program(spec)].program_class()(spec, seed, **kw)

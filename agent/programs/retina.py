@@ -44,6 +44,12 @@ class RetinaProgramParams:
 
 
 class RetinaProgram(Program):
+    """The retina program (ch. 4): saccade learning, field positions published as the embedding.
+
+    Built by `make_program` as `RetinaProgram(spec, seed, params=None, **overrides)`; the
+    hyperparameters are `RetinaProgramParams`. Needs a 2-D box action space and a "fields" sensor.
+    """
+
     name = "retina"
     Params = RetinaProgramParams
 
@@ -110,15 +116,16 @@ class RetinaProgram(Program):
             drop_step=drop_step,
         )
 
-    def _settled(self) -> bool:
-        """Back to 90 % of the reward before the drop, or (when that level is out of reach, as
-        after a lesion) no gain of more than `settle_gain` between the last two windows."""
-        since = self.episodes - self._drop[1]
+    def _settled(self, drop: tuple[int, int, float]) -> bool:
+        """Back to 90 % of the reward before the `drop` (step, episode, reward before), or (when
+        that level is out of reach, as after a lesion) no gain of more than `settle_gain` between
+        the last two windows."""
+        since = self.episodes - drop[1]
         w = self.settle_window
         if since < w:
             return False
         now = float(np.mean(self._rewards[-w:]))
-        if now >= 0.9 * self._drop[2]:
+        if now >= 0.9 * drop[2]:
             return True
         if since < max(self.settle_min, 2 * w):
             return False
@@ -126,12 +133,13 @@ class RetinaProgram(Program):
         return now <= before * (1 + self.settle_gain) + 1e-9
 
     def act(self, obs: Observation) -> Decision:
+        """Saccade at the start of an episode; learn from its reward at the end, then reset."""
         f = self._fields(obs)
         if obs.t == 0 and not obs.done:
             self._pre = f
             self._action = self.learner.act(f)
             return Decision(tuple(float(v) for v in self._action))
-        if self._pre is not None and obs.t > 0:
+        if self._pre is not None and self._action is not None and obs.t > 0:  # set together in the t == 0 branch
             self.learner.learn_one(self._pre, self._action, obs.reward)
             self.episodes += 1
             self._rewards.append(float(obs.reward))
@@ -139,17 +147,17 @@ class RetinaProgram(Program):
                 del self._rewards[: -2 * self.settle_window]
             if self.episodes % self.embed_every == 0:
                 self.emit(self.embedding(Trigger.PERIODIC, obs.step))
-            if self._drop is not None and self._settled():
+            drop = self._drop
+            if drop is not None and self._settled(drop):
                 self.emit(
                     EventOutput(
                         EventKind.RELEARNED,
-                        f"reward settled {self.episodes - self._drop[1]} episodes "
-                        f"after the drop at step {self._drop[0]}",
+                        f"reward settled {self.episodes - drop[1]} episodes after the drop at step {drop[0]}",
                         obs.step,
-                        {"episodes": float(self.episodes - self._drop[1])},
+                        {"episodes": float(self.episodes - drop[1])},
                     )
                 )
-                self.emit(self.embedding(Trigger.RELEARNED, obs.step, drop_step=self._drop[0]))
+                self.emit(self.embedding(Trigger.RELEARNED, obs.step, drop_step=drop[0]))
                 self.learner.end_relearning()
                 self._drop = None
         self._pre = None
@@ -163,12 +171,14 @@ class RetinaProgram(Program):
         return float(np.log1p(max(obs.reward, 0.0))) if obs.t > 0 and obs.done else None
 
     def on_drop(self, step: int) -> None:
+        """Reset the reward estimates (exploration rises) and remember the drop until relearned."""
         self.learner.reset_estimates()
         before = self._rewards[-2 * self.settle_window : -50] or self._rewards
         self._drop = (step, self.episodes, float(np.mean(before)) if before else 0.0)
         self.emit(EventOutput(EventKind.RELEARNING, "reward estimates reset; exploration raised", step))
 
     def state(self) -> dict[str, Any]:
+        """The base snapshot plus the learner, counters, pending saccade, recent rewards and drop."""
         return {
             **super().state(),
             "learner": self.learner.state(),
@@ -181,6 +191,7 @@ class RetinaProgram(Program):
         }
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a program built with the same spec and params."""
         super().restore(state)
         self.learner.restore(state["learner"])
         self.episodes, self.version = int(state["episodes"]), int(state["version"])
@@ -190,4 +201,5 @@ class RetinaProgram(Program):
         self._drop = None if drop is None else (int(drop[0]), int(drop[1]), float(drop[2]))
 
     def world_restarted(self) -> None:
+        """Forget the saccade in flight: its outcome will not arrive."""
         self._pre = None

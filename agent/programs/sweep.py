@@ -26,6 +26,7 @@ class StartStateSweep:
         self._restart = False
 
     def begin(self) -> Decision:
+        """The first decision of a sweep: reset the world to start state 0."""
         return Decision(reset=True, start=0)
 
     def step(
@@ -34,6 +35,9 @@ class StartStateSweep:
         choose: Callable[[Observation, list[int]], int],
         stop: Callable[[Observation, list[int]], bool] | None = None,
     ) -> Decision:
+        """Answer one observation of the sweep: the next action of the trace, or a reset to the next
+        start state when the trace ends (`finished` after the last one).
+        """
         if self._restart or (obs.t == 0 and obs.start != self._start):
             self._restart = False  # the world or the agent restarted mid-trace: this start state again
             return Decision(reset=True, start=self._start)

@@ -11,6 +11,7 @@ lengths, Eq 7.3), classical MDS to 1-D.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,6 +27,7 @@ from sensorimotor.protocol.params import option, parse
 
 
 def foveal_difference(obs: Observation) -> float:
+    """d = mean |f_l - f_r| (Eq 7.2): how far the two foveae are from seeing the same thing."""
     left = obs.tensors["left"].astype(np.float64, copy=False)
     right = obs.tensors["right"].astype(np.float64, copy=False)
     if left.shape != right.shape:
@@ -46,10 +48,11 @@ class VergencePractice:
         self.reset()
 
     def reset(self) -> None:
+        """Drop the pending step and the count of samples since the last iteration."""
         self.new_samples = 0
         self._prev: tuple[float, int] | None = None
 
-    def observe(self, obs: Observation, d: float, terminal: bool, emit) -> bool:
+    def observe(self, obs: Observation, d: float, terminal: bool, emit: Callable[[EventOutput], None]) -> bool:
         """Learn from the step that led to `obs`; True when an LSPI iteration has just run."""
         if obs.t > 0 and self._prev is not None:
             self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, terminal)
@@ -75,11 +78,13 @@ class VergencePractice:
         return {"new_samples": self.new_samples, "prev": None if self._prev is None else list(self._prev)}
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot."""
         self.new_samples = int(state["new_samples"])
         prev = state["prev"]
         self._prev = None if prev is None else (float(prev[0]), int(prev[1]))
 
     def choose(self, d: float) -> int:
+        """An epsilon-greedy vergence action for difference `d` (remembered for `observe`)."""
         a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
         self._prev = (d, a)
         return a
@@ -101,6 +106,13 @@ class VergenceProgramParams:
 
 
 class VergenceProgram(Program):
+    """The vergence program (ch. 7): LSPI verging, vergence-trace lengths embedded as 1-D depth.
+
+    Built by `make_program` as `VergenceProgram(spec, seed, params=None, **overrides)`; the
+    hyperparameters are `VergenceProgramParams`. Needs 2 discrete actions (converge, diverge),
+    sensors "left" and "right", and >= 2 start states.
+    """
+
     name = "vergence"
     Params = VergenceProgramParams
 
@@ -123,6 +135,7 @@ class VergenceProgram(Program):
         self._sweep = StartStateSweep(spec.n_starts, max_trace)
 
     def act(self, obs: Observation) -> Decision:
+        """Explore (feeding LSPI) or, after each LSPI iteration, sweep the start states and embed."""
         d = foveal_difference(obs)
         if self.phase == "explore":
             if self.practice.observe(obs, d, obs.done, self.emit):
@@ -160,6 +173,7 @@ class VergenceProgram(Program):
         )
 
     def state(self) -> dict[str, Any]:
+        """The base snapshot plus LSPI, practice, phase and sweep (see `agent.programs.base`)."""
         return {
             **super().state(),
             "lspi": self.lspi.state(),
@@ -169,6 +183,7 @@ class VergenceProgram(Program):
         }
 
     def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of a program built with the same spec and params."""
         super().restore(state)
         self.lspi.restore(state["lspi"])
         self.practice.restore(state["practice"])
@@ -177,5 +192,6 @@ class VergenceProgram(Program):
         self._sweep.restore(state["sweep"])
 
     def world_restarted(self) -> None:
+        """Drop the pending sample and restart the trace in progress."""
         self.practice.reset()
         self._sweep.interrupted()
