@@ -133,13 +133,24 @@ def encode_checkpoint(ckpt: Checkpoint) -> bytes:
 
 
 def write_atomically(path: str, data: bytes) -> None:
-    """Replace `path` by `data` so that a crash leaves either the old file or the new one."""
+    """Replace `path` by `data` so that a crash leaves either the old file or the new one.
+
+    A write that fails (a full disk: ENOSPC from write, flush, fsync or close) raises its OSError
+    with `path` untouched and the temporary file removed, so it does not hold on to the space.
+    """
     tmp = f"{path}.tmp"
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
     try:  # make the rename itself durable
         fd = os.open(os.path.dirname(os.path.abspath(path)), os.O_RDONLY)
     except OSError:

@@ -299,7 +299,10 @@ class AgentDaemon:
             except ValueError:  # a program whose state is not arrays and plain values: a bug, not fatal
                 log.exception("world %s: checkpoint not written", wid)
                 continue
-            write_atomically(path, data)
+            try:
+                write_atomically(path, data)
+            except OSError as e:  # e.g. a full disk: the previous checkpoint stays, learning goes on
+                log.error("world %s: checkpoint not written (%s); the previous one is kept", wid, e)
 
     def _attach(self, wid: str) -> None:
         try:

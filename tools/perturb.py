@@ -1,4 +1,8 @@
-"""`sme perturb KIND --world ID`: change a running world's body or sensors. The agent is not told."""
+"""`sme perturb KIND --world ID`: change a running world's body or sensors. The agent is not told.
+
+The world checks the parameters against its declaration (`World.Perturbations`) and refuses a bad
+control with a `control_refused` world event before anything changes; `sme perturb --list` prints
+every world kind's perturbations and their parameter tables."""
 
 from __future__ import annotations
 
@@ -22,6 +26,27 @@ KINDS = {
 }
 
 
+def list_perturbations() -> str:
+    """Every world kind's perturbations with their parameter tables (types, defaults, ranges)."""
+    from sensorimotor.protocol.params import table_text
+    from sensorimotor.worlds.registry import WORLDS, world_perturbations
+
+    out = []
+    for name in sorted(WORLDS):
+        kinds = world_perturbations(name)
+        if not kinds:
+            out.append(f"{name}: no perturbations")
+            continue
+        out.append(
+            f"{name}:\n"
+            + "\n".join(
+                table_text(cls, f"  {kind}: {(cls.__doc__ or '').strip()}").replace("\n", "\n  ")
+                for kind, cls in kinds.items()
+            )
+        )
+    return "\n\n".join(out)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "perturb",
@@ -30,8 +55,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         + "; ".join(f"{k}: {v}" for k, v in KINDS.items())
         + ". The agent is not told: it has to notice the change from its own reward.",
     )
-    p.add_argument("kind", help="perturbation kind: " + ", ".join(KINDS))
-    p.add_argument("--world", required=True, help="id of the running world")
+    p.add_argument("kind", nargs="?", help="perturbation kind: " + ", ".join(KINDS) + " (see --list)")
+    p.add_argument("--world", default=None, help="id of the running world (required unless --list)")
+    p.add_argument(
+        "--list",
+        "--list-params",
+        dest="list",
+        action="store_true",
+        help="print every world kind's perturbations and their parameters (type, default, range) and exit",
+    )
     p.add_argument("--param", action="append", metavar="K=V", help="perturbation parameter, repeatable")
     p.add_argument("--baseline", type=float, default=None, metavar="M", help="morph: camera baseline in metres")
     p.add_argument(
@@ -45,6 +77,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main_args(args: argparse.Namespace) -> int:
+    if args.list:
+        print(list_perturbations())
+        return 0
+    if not args.kind or not args.world:
+        print("sme perturb: KIND and --world ID are required (see `sme perturb --list`)", file=sys.stderr)
+        return 2
     try:
         keys.check_id(args.world, "world id")
     except ValueError as e:

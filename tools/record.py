@@ -1,15 +1,22 @@
-"""`sme record FILE.mcap`: record every message of a session into a self-describing MCAP file."""
+"""`sme record FILE.mcap`: record every message of a session into a self-describing MCAP file.
+
+The file is created before the bus is touched, so a missing or read-only directory fails at once
+(exit 2). A write that fails while recording (a full disk: ENOSPC) stops the recorder with exit 1 and
+a clear error; the file then reads back up to its last complete chunk (`sme recover` completes it).
+"""
 
 from __future__ import annotations
 
 import argparse
 import collections
+import errno
 import logging
+import os
 import signal
 import sys
 import threading
 import time
-from typing import Any
+from typing import Any, BinaryIO
 
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
@@ -18,6 +25,29 @@ from sensorimotor.tools.mcap_io import COMPRESSIONS, McapSink, Record, schema_of
 
 log = logging.getLogger("sme.record")
 
+#: errno values that mean "no room left": the disk or the user's quota is full
+DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+
+
+def describe_write_error(e: OSError) -> str:
+    """'disk full (...)' for ENOSPC and friends, 'write failed (...)' for other OS errors."""
+    what = "disk full" if e.errno in DISK_FULL else "write failed"
+    return f"{what} ({e.strerror or e})"
+
+
+def open_output(path: str) -> BinaryIO:
+    """Create (or truncate) the recording file: an OSError with a clear message if the directory is
+    missing, not a directory, or not writable. Done before connecting, so nothing waits in vain."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise OSError(errno.ENOENT, f"cannot record to {path}: the directory {folder} does not exist")
+    if os.path.isdir(path):
+        raise OSError(errno.EISDIR, f"cannot record to {path}: it is a directory")
+    try:
+        return open(path, "wb")  # buffered: McapSink.flush() pushes it to the OS
+    except OSError as e:
+        raise OSError(e.errno, f"cannot record to {path}: {e.strerror or e}") from None
+
 
 class Recorder:
     """Subscribes to `key_expr` and writes every message on one writer thread. Chunks are closed
@@ -25,7 +55,12 @@ class Recorder:
     recorder killed with SIGKILL loses at most the last 0.2 s (or chunk) of messages: what reached the
     OS survives the kill. When a world
     appears, its spec and truth (served by queryables, not published) are fetched and written too,
-    so a recording can be replayed into a fresh agent."""
+    so a recording can be replayed into a fresh agent.
+
+    A write, flush or finish that fails (a full disk) stops the writing: `error` says why (it
+    contains "disk full" for ENOSPC), `failed` is set, further messages are dropped, and the file
+    keeps everything up to its last complete chunk. `stream` is an already opened file (see
+    `open_output`); by default `path` is opened here."""
 
     def __init__(
         self,
@@ -35,13 +70,19 @@ class Recorder:
         compression: str = "zstd",
         chunk_size: int = 64 * 1024,
         flush_every: float = 0.2,
+        stream: BinaryIO | None = None,
     ) -> None:
         self.bus = bus
         self.path = path
         self.key_expr = key_expr
         self.flush_every = flush_every
-        self._file = open(path, "wb")  # buffered: McapSink.flush() pushes it to the OS
-        self._sink = McapSink(self._file, compression, chunk_size)
+        self.error: str | None = None
+        self.failed = threading.Event()
+        self._file = stream if stream is not None else open_output(path)
+        try:
+            self._sink = McapSink(self._file, compression, chunk_size)  # writes the header
+        except OSError as e:
+            self._fail(e, "starting")
         self._queue: collections.deque[tuple[int, BusMessage]] = collections.deque()
         self._cv = threading.Condition()
         self._stop = threading.Event()
@@ -52,8 +93,15 @@ class Recorder:
         self._worlds: set[str] = set()
         self._seq = 0
 
+    def _fail(self, e: OSError, when: str) -> None:
+        """Remember the first write error and stop writing (the file keeps its complete chunks)."""
+        if self.error is None:
+            self.error = f"{describe_write_error(e)} while {when} {self.path}"
+            log.debug("%s", self.error)  # `error` carries it; `sme record` prints it
+        self.failed.set()
+
     def _on(self, msg: BusMessage) -> None:
-        if msg.kind != "put":
+        if msg.kind != "put" or self.failed.is_set():
             return
         with self._cv:
             self._queue.append((time.time_ns(), msg))
@@ -85,8 +133,16 @@ class Recorder:
         return self
 
     def _run(self) -> None:
+        try:
+            self._write_loop()
+        except OSError as e:  # ENOSPC and friends, from a write or a flush
+            self._fail(e, "writing")
+        with self._cv:  # nothing more will be written
+            self._queue.clear()
+
+    def _write_loop(self) -> None:
         last_flush = time.monotonic()
-        while True:
+        while not self.failed.is_set():
             with self._cv:
                 if not self._queue:
                     if self._stop.is_set():
@@ -104,16 +160,28 @@ class Recorder:
 
     @property
     def written(self) -> int:
-        return self._sink.count
+        """Messages handed to the MCAP writer (after a write error, not all of them are in the file)."""
+        sink = getattr(self, "_sink", None)
+        return sink.count if sink is not None else 0
 
     def stop(self) -> None:
-        """Write everything received, finish the file (summary and index), close it."""
+        """Write everything received, finish the file (summary and index), close it. After a write
+        error the file is closed as it is (readable up to its last complete chunk); a finish or
+        close that fails now sets `error` too. Never raises an OSError."""
         self._stop.set()
         with self._cv:
             self._cv.notify_all()
-        self._thread.join()
-        self._sink.finish()
-        self._file.close()
+        if self._thread.is_alive():
+            self._thread.join()
+        if not self.failed.is_set():
+            try:
+                self._sink.finish()
+            except OSError as e:
+                self._fail(e, "finishing")
+        try:
+            self._file.close()  # flushes what is buffered: may fail on a full disk too
+        except OSError as e:
+            self._fail(e, "closing")
 
     def __enter__(self) -> Recorder:
         return self.start()
@@ -131,7 +199,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "with its protobuf schemas embedded, so standard tools (mcap CLI, Foxglove, `rerun mcap "
         "convert`) read it. Chunks are flushed every 0.2 s: a recorder killed with SIGKILL "
         "leaves a file `sme replay` reads up to its last complete chunk, and `sme recover` turns "
-        "into a complete one. Stop with Ctrl-C or --seconds.",
+        "into a complete one. FILE is created before connecting (a missing or read-only directory: "
+        "exit 2); a disk that fills stops the recorder with exit 1 and the file readable up to its last "
+        "complete chunk. Stop with Ctrl-C or --seconds.",
     )
     p.add_argument("file", help="output .mcap file")
     p.add_argument(
@@ -146,8 +216,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def main_args(args: argparse.Namespace) -> int:
     try:
+        out = open_output(args.file)  # before connecting: a bad path fails at once
+    except OSError as e:
+        print(f"sme record: {e.strerror or e}", file=sys.stderr)
+        return 2
+    try:
         bus = Bus(bus_config_from_args(args, "world"), wait_limit=args.seconds)
     except BusError as e:
+        out.close()
         print(f"sme record: {e}", file=sys.stderr)
         return 2
     stop = threading.Event()
@@ -155,10 +231,10 @@ def main_args(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
     t0 = time.monotonic()
     with bus:
-        rec = Recorder(bus, args.file, args.keys, args.compression, args.chunk_kb * 1024).start()
+        rec = Recorder(bus, args.file, args.keys, args.compression, args.chunk_kb * 1024, stream=out).start()
         print(f"sme record: recording {args.keys} to {args.file}; Ctrl-C stops", file=sys.stderr, flush=True)
         next_tick = 5.0
-        while not stop.is_set():
+        while not stop.is_set() and not rec.failed.is_set():
             el = time.monotonic() - t0
             if args.seconds is not None and el >= args.seconds:
                 break
@@ -172,6 +248,13 @@ def main_args(args: argparse.Namespace) -> int:
             stop.wait(0.1)
         rec.stop()
     el = time.monotonic() - t0
+    if rec.error is not None:
+        print(
+            f"sme record: {rec.error}; recording stopped after {el:.1f} s. The file reads back up to its "
+            f"last complete chunk (`sme replay`, or `sme recover {args.file} NEW.mcap` for a complete file)",
+            file=sys.stderr,
+        )
+        return 1
     print(
         f"sme record: {rec.written} messages in {el:.1f} s ({rec.written / max(el, 1e-9):,.0f}/s), "
         f"{len(rec.by_key)} channels, received {rec.received}, max backlog {rec.max_backlog}",

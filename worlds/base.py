@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import abc
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -10,6 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from sensorimotor.protocol.messages import Control, Truth, WorldSpec
+from sensorimotor.protocol.params import ParamError, describe, format_value, parse, suggest
 
 
 @dataclass(frozen=True)
@@ -29,6 +31,33 @@ class NoParams:
     """A world without parameters."""
 
 
+@dataclass(frozen=True)
+class HealParams:
+    """Undo every perturbation: the body and sensors the world started with."""
+
+
+def param_ranges(cls: type) -> str:
+    """One line naming every declared parameter of `cls` with its type, range and default, e.g.
+    ``"radius: float in 0.0..512.0 (default 6.0)"``; for refusal messages."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    parts = []
+    for info in describe(cls):
+        meta = fields[info.name].metadata
+        lo, hi, choices = meta.get("min"), meta.get("max"), meta.get("choices")
+        if choices is not None:
+            rng = " one of " + "|".join(format_value(c) for c in choices)
+        elif lo is not None and hi is not None:
+            rng = f" in {format_value(lo)}..{format_value(hi)}"
+        elif lo is not None:
+            rng = f" >= {format_value(lo)}"
+        elif hi is not None:
+            rng = f" <= {format_value(hi)}"
+        else:
+            rng = ""
+        parts.append(f"{info.name}: {info.type}{rng} (default {info.default})")
+    return ", ".join(parts) if parts else "no parameters"
+
+
 class World(abc.ABC):
     """A simulator the agent learns from. Worlds own their random generator (`seed=`).
 
@@ -40,6 +69,8 @@ class World(abc.ABC):
     kind: str = "world"
     max_episode_steps: int = 1000
     Params: ClassVar[type] = NoParams
+    #: perturbation kind -> its parameter dataclass (declared once; `perturbation_params` parses)
+    Perturbations: ClassVar[Mapping[str, type]] = {}
 
     def __init__(self, world_id: str = "w0", seed: int = 0) -> None:
         self.world_id = world_id
@@ -67,8 +98,29 @@ class World(abc.ABC):
             raise ValueError(f"start {start} out of range 0..{n_starts - 1}")
         return int(start)
 
+    def perturbation_params(self, control: Control) -> Any:
+        """`control.params` parsed with the declaration of its kind in `Perturbations`.
+
+        Call it before changing anything: an unknown kind, an unknown key, a value that is not of
+        the declared type (NaN and inf are not floats here) or out of range raises a
+        PerturbationError naming the parameter and every valid range, and the world stays as it was.
+        """
+        cls = self.Perturbations.get(control.kind)
+        if cls is None:
+            best = suggest(control.kind, self.Perturbations)
+            hint = f" (did you mean {best!r}?)" if best else ""
+            valid = ", ".join(self.Perturbations) or "(none)"
+            raise PerturbationError(f"{self.kind} has no perturbation {control.kind!r}{hint}; valid: {valid}")
+        name = f"{self.kind} {control.kind}"
+        try:
+            return parse(cls, dict(control.params), name=name)
+        except ParamError as e:
+            raise PerturbationError(f"{e}; {name} takes {param_ranges(cls)}") from None
+
     def perturb(self, control: Control) -> str:
-        """Apply a perturbation; return a one-line description of what changed."""
+        """Apply a perturbation; return a one-line description of what changed. Refuse a bad one
+        with a PerturbationError before changing anything (see `perturbation_params`)."""
+        self.perturbation_params(control)
         raise PerturbationError(f"world kind {self.kind!r} has no perturbation {control.kind!r}")
 
     def truth(self) -> Truth | None:
@@ -87,21 +139,3 @@ class World(abc.ABC):
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
-
-
-def param(params: Mapping[str, Any], name: str, default: Any, cast: type = str) -> Any:
-    """Read one perturbation (`Control`) parameter with a clear error when it does not parse.
-    World parameters are declared in the world's `Params` dataclass instead."""
-    if name not in params:
-        return default
-    raw = params[name]
-    try:
-        if cast is bool and isinstance(raw, str):
-            if raw.lower() in ("1", "true", "yes", "on"):
-                return True
-            if raw.lower() in ("0", "false", "no", "off"):
-                return False
-            raise ValueError(raw)
-        return cast(raw)
-    except (TypeError, ValueError):
-        raise ValueError(f"parameter {name}={raw!r} is not a valid {cast.__name__}") from None

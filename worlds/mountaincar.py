@@ -32,7 +32,7 @@ import numpy as np
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import option, parse
-from sensorimotor.worlds.base import PerturbationError, StepResult
+from sensorimotor.worlds.base import StepResult
 from sensorimotor.worlds.mountaincar_dynamics import EVAL_SEED, MountainCarParams, evaluation_states, random_state
 from sensorimotor.worlds.mountaincar_dynamics import step as car_step
 from sensorimotor.worlds.vergence import VergenceWorld, VergenceWorldParams, verge
@@ -210,12 +210,10 @@ class MountainCarWorld(VergenceWorld):
         return self._obs(1.0 if reached else 0.0, reached or self.car_t >= self.max_car_steps)
 
     def perturb(self, control: Control) -> str:
-        if control.kind in ("morph", "heal"):
-            out = super().perturb(control)
-            self._images.clear()
-            self._goals.clear()
-            return out
-        raise PerturbationError(f"mountaincar has no perturbation {control.kind!r}; use morph or heal")
+        out = super().perturb(control)  # morph or heal, validated before anything changes
+        self._images.clear()
+        self._goals.clear()
+        return out
 
     def truth(self) -> Truth:
         return Truth(

@@ -1,5 +1,5 @@
-"""World kinds by name, so that `sme world NAME` and the demo can build them, and `--list-params`
-and the README can show each kind's declared parameters.
+"""World kinds by name, so that `sme world NAME` and the demo can build them, and `--list-params`,
+`sme perturb --list` and the README can show each kind's declared parameters and perturbations.
 
 World modules are imported lazily (PyBullet loads only for the worlds that need it)."""
 
@@ -58,6 +58,11 @@ def world_kind(name: str) -> WorldKind:
 def world_params(name: str) -> type:
     """The parameter dataclass of world kind `name`."""
     return world_kind(name).params_type()
+
+
+def world_perturbations(name: str) -> dict[str, type]:
+    """World kind `name`'s perturbations: Control kind -> its parameter dataclass (may be empty)."""
+    return dict(world_kind(name).world_class().Perturbations)
 
 
 def parse_world_params(name: str, params: Mapping[str, Any] | None = None) -> Any:

@@ -28,7 +28,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import option, parse
-from sensorimotor.worlds.base import PerturbationError, StepResult, World, param
+from sensorimotor.worlds.base import HealParams, StepResult, World
 from sensorimotor.worlds.bullet import disconnect
 
 SCENES = ("spot", "spots", "texture")
@@ -63,10 +63,32 @@ class RetinaWorldParams:
     wall_distance: float = option(5.0, "distance from the camera to the wall, m")
 
 
+@dataclass(frozen=True)
+class LesionParams:
+    """Fields whose centre lies within `radius` px of (`u`, `v`) read 0 from now on (lesions add up)."""
+
+    u: float = option(6.0, "lesion centre, retina px right of the retina centre", min=-512.0, max=512.0)
+    v: float = option(0.0, "lesion centre, retina px up from the retina centre", min=-512.0, max=512.0)
+    radius: float = option(6.0, "lesion radius, retina px", min=0.0, max=512.0)
+
+
+@dataclass(frozen=True)
+class ReverseParams:
+    """Swap the up/down motor commands (a second reverse restores them)."""
+
+
+@dataclass(frozen=True)
+class NoiseParams:
+    """Additive Gaussian sensor noise on every field (activations are in 0..1); replaces earlier noise."""
+
+    sd: float = option(0.05, "standard deviation of the noise (0 turns it off)", min=0.0, max=1.0)
+
+
 class RetinaWorld(World):
     kind = "retina"
     max_episode_steps = 1
     Params = RetinaWorldParams
+    Perturbations = {"lesion": LesionParams, "reverse": ReverseParams, "noise": NoiseParams, "heal": HealParams}
 
     def __init__(
         self, world_id: str = "retina", seed: int = 0, params: RetinaWorldParams | None = None, **overrides: Any
@@ -250,28 +272,22 @@ class RetinaWorld(World):
         return StepResult({"fields": fields}, float(fields.sum(dtype=np.float64)), True)
 
     def perturb(self, control: Control) -> str:
-        k, prm = control.kind, control.params
-        if k == "lesion":
-            u = param(prm, "u", 6.0, float)
-            v = param(prm, "v", 0.0, float)
-            r = param(prm, "radius", 6.0, float)
+        prm = self.perturbation_params(control)  # refuses a bad control before anything changes
+        if isinstance(prm, LesionParams):
+            u, v, r = prm.u, prm.v, prm.radius
             hit = np.hypot(self.centres[:, 0] - u, self.centres[:, 1] - v) <= r
             self.lesion |= hit
             return f"lesion: {int(hit.sum())} fields within {r} px of ({u}, {v}) px now read 0"
-        if k == "reverse":
+        if isinstance(prm, ReverseParams):
             self.reversed = not self.reversed
             return f"reverse: up/down motor commands {'swapped' if self.reversed else 'restored'}"
-        if k == "noise":
-            self.noise_sd = param(prm, "sd", 0.05, float)
-            if self.noise_sd < 0:
-                raise PerturbationError("noise sd must be >= 0")
+        if isinstance(prm, NoiseParams):
+            self.noise_sd = prm.sd
             return f"noise: additive sensor noise sd {self.noise_sd}"
-        if k == "heal":
-            self.lesion[:] = False
-            self.reversed = False
-            self.noise_sd = 0.0
-            return "heal: lesion, reversal and noise undone"
-        raise PerturbationError(f"retina has no perturbation {k!r}; use lesion, reverse, noise or heal")
+        self.lesion[:] = False  # heal
+        self.reversed = False
+        self.noise_sd = 0.0
+        return "heal: lesion, reversal and noise undone"
 
     def truth(self) -> Truth:
         pos = -self.saccade_for(self.centres[:, 0], self.centres[:, 1])

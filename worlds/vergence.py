@@ -25,7 +25,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import option, parse
-from sensorimotor.worlds.base import PerturbationError, StepResult, World, param
+from sensorimotor.worlds.base import HealParams, StepResult, World
 from sensorimotor.worlds.bullet import disconnect
 
 CONVERGE, DIVERGE = 0, 1
@@ -82,9 +82,18 @@ class VergenceWorldParams:
     room: bool = option(False, "a closed room with smooth-noise textures instead of a backdrop")
 
 
+@dataclass(frozen=True)
+class MorphParams:
+    """Change the body while the world runs: camera baseline and/or orientation."""
+
+    baseline: float | None = option(None, "new distance between the cameras, m (none: unchanged)", min=0.05, max=2.0)
+    vertical: bool | None = option(None, "cameras one above the other (none: unchanged)")
+
+
 class VergenceWorld(World):
     kind = "vergence"
     Params = VergenceWorldParams
+    Perturbations = {"morph": MorphParams, "heal": HealParams}
 
     def __init__(
         self, world_id: str = "vergence", seed: int = 0, params: VergenceWorldParams | None = None, **overrides: Any
@@ -267,16 +276,18 @@ class VergenceWorld(World):
         return self._obs(0.0, self.t >= self.max_episode_steps)
 
     def perturb(self, control: Control) -> str:
-        if control.kind == "morph":
-            self.baseline = param(control.params, "baseline", self.baseline, float)
-            self.vertical = param(control.params, "vertical", self.vertical, bool)
-            self._goal_cache.clear()
-            return f"morph: baseline {self.baseline} m, cameras {'vertical' if self.vertical else 'horizontal'}"
-        if control.kind == "heal":
+        prm = self.perturbation_params(control)  # refuses a bad control before anything changes
+        if isinstance(prm, MorphParams):
+            if prm.baseline is not None:
+                self.baseline = prm.baseline
+            if prm.vertical is not None:
+                self.vertical = prm.vertical
+            what = "morph"
+        else:  # heal
             self.baseline, self.vertical = self._body0
-            self._goal_cache.clear()
-            return f"heal: baseline {self.baseline} m, cameras {'vertical' if self.vertical else 'horizontal'}"
-        raise PerturbationError(f"vergence has no perturbation {control.kind!r}; use morph or heal")
+            what = "heal"
+        self._goal_cache.clear()
+        return f"{what}: baseline {self.baseline} m, cameras {'vertical' if self.vertical else 'horizontal'}"
 
     def truth(self) -> Truth:
         return Truth(
