@@ -79,17 +79,17 @@ class BusConfig:
             Credentials from `sme secure init`: the session uses TLS with this role's certificate.
         """
         ep = endpoint or (DEFAULT_SECURE_ENDPOINT if secure_dir else DEFAULT_ENDPOINT)
-        sec = {"secure_dir": secure_dir}
         if role == "agent":
-            return cls(mode="router", connect=(), listen=(ep,), credential="agent", **sec)
-        if role == "world":
-            return cls(mode="client", connect=(ep,), listen=(), retry=True, credential="world", **sec)
-        if role == "reader":
-            return cls(mode="client", connect=(ep,), listen=(), retry=True, credential="tool", **sec)
-        if role == "tool":
-            return cls(mode="client", connect=(ep,), listen=(), credential="tool", **sec)
-        if role == "perturb":
-            return cls(mode="client", connect=(ep,), listen=(), credential="perturb", **sec)
+            return cls(mode="router", connect=(), listen=(ep,), credential="agent", secure_dir=secure_dir)
+        clients = {
+            "world": (True, "world"),
+            "reader": (True, "tool"),
+            "tool": (False, "tool"),
+            "perturb": (False, "perturb"),
+        }
+        if role in clients:
+            retry, cred = clients[role]
+            return cls(mode="client", connect=(ep,), listen=(), retry=retry, credential=cred, secure_dir=secure_dir)
         raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
 
     def check_secure(self) -> security.Credential | None:

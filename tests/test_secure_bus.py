@@ -178,6 +178,9 @@ def test_agent_and_world_learn_on_the_secure_bus(procs, tls: str, secure_dir: st
     assert errs[0] > 0.5 and min(errs[-2:]) < 0.05, errs
     st = _sme("status", "--json", "--connect", tls, *s)
     assert st.returncode == 0, st.stderr
+    # the perturb credential sees the world alive and sends its control
+    pt = _sme("perturb", "heal", "--world", WID, "--connect", tls, *s)
+    assert pt.returncode == 0 and "sent heal" in pt.stdout, pt.stderr
     # the same tool without the credential cannot even connect
     assert _sme("status", "--connect", tls).returncode == 2
     assert status(tls) is None  # a plain client on the tls port gets nothing
@@ -191,6 +194,12 @@ def test_demo_runs_on_the_secure_bus(tls: str, secure_dir: str) -> None:
     assert "mutual TLS" in out.stdout
     m = re.search(r"Procrustes error against truth ([0-9.]+)", out.stdout)
     assert m and float(m.group(1)) < 0.05, out.stdout
+
+
+@pytest.mark.parametrize("cmd", ["agent", "world", "perturb", "record", "watch", "status", "view", "replay", "demo"])
+def test_every_bus_command_takes_secure(cmd: str) -> None:
+    out = _sme(cmd, "--help")
+    assert out.returncode == 0 and "--secure DIR" in out.stdout, out.stdout
 
 
 def test_secure_refuses_plain_endpoints_and_missing_credentials(endpoint: str, tmp_path: Path) -> None:

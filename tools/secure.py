@@ -20,7 +20,6 @@ import sys
 from pathlib import Path
 
 from sensorimotor.protocol.security import CA_FILE, CA_KEY_FILE, CREDENTIALS, common_name
-from sensorimotor.tools.common import require
 
 README = """\
 Credentials of a locked-down sme bus (made by `sme secure init`). Pass this directory as --secure DIR.
@@ -102,7 +101,7 @@ def init(
     days : int
         Validity of every certificate.
     """
-    x509 = require("cryptography.x509", package="cryptography")
+    from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
     from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
