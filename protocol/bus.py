@@ -23,7 +23,8 @@ from typing import Any, NamedTuple
 
 import zenoh
 
-from sensorimotor.protocol.keys import DEFAULT_ENDPOINT
+from sensorimotor.protocol import security
+from sensorimotor.protocol.keys import DEFAULT_ENDPOINT, DEFAULT_SECURE_ENDPOINT
 
 log = logging.getLogger("sme.bus")
 
@@ -41,6 +42,14 @@ class BusMessage(NamedTuple):
 
 @dataclass(frozen=True)
 class BusConfig:
+    """How to open a session: mode, endpoints, and (with `secure_dir`) the credential to present.
+
+    `credential` is the role whose certificate this session presents on a secure bus (`agent`,
+    `world`, `tool`, `perturb`; see `protocol.security`); `secure_dir` the directory made by
+    `sme secure init`. A secure router listens with mutual TLS and enforces the access-control rules
+    of `security.acl_rules()`; a secure client presents its certificate.
+    """
+
     mode: str = "client"
     connect: tuple[str, ...] = (DEFAULT_ENDPOINT,)
     listen: tuple[str, ...] = ()
@@ -48,19 +57,55 @@ class BusConfig:
     multicast_scouting: bool = False
     lease_ms: int | None = None
     retry: bool = False  # client: wait for the router to appear instead of failing
+    credential: str = "tool"
+    secure_dir: str | None = None
 
-    ROLES = ("agent", "world", "tool")
+    ROLES = ("agent", "world", "reader", "tool", "perturb")
 
     @classmethod
-    def for_role(cls, role: str, endpoint: str = DEFAULT_ENDPOINT) -> BusConfig:
-        """Embedded defaults: agent = router listening on `endpoint`; world = retrying peer; tool = client."""
+    def for_role(cls, role: str, endpoint: str | None = None, secure_dir: str | None = None) -> BusConfig:
+        """Embedded defaults per role.
+
+        Parameters
+        ----------
+        role : str
+            ``agent``: router listening on `endpoint` (agent credential); ``world``: client that waits
+            for the agent (world credential; also `sme replay`); ``reader``: client that waits, tool
+            credential (record, watch, view); ``tool``: client that fails fast, tool credential
+            (status); ``perturb``: client that fails fast, perturb credential.
+        endpoint : str, optional
+            Default `tcp/127.0.0.1:7447`, or `tls/127.0.0.1:7447` with `secure_dir`.
+        secure_dir : str, optional
+            Credentials from `sme secure init`: the session uses TLS with this role's certificate.
+        """
+        ep = endpoint or (DEFAULT_SECURE_ENDPOINT if secure_dir else DEFAULT_ENDPOINT)
         if role == "agent":
-            return cls(mode="router", connect=(), listen=(endpoint,))
-        if role == "world":
-            return cls(mode="client", connect=(endpoint,), listen=(), retry=True)
-        if role == "tool":
-            return cls(mode="client", connect=(endpoint,), listen=())
+            return cls(mode="router", connect=(), listen=(ep,), credential="agent", secure_dir=secure_dir)
+        clients = {
+            "world": (True, "world"),
+            "reader": (True, "tool"),
+            "tool": (False, "tool"),
+            "perturb": (False, "perturb"),
+        }
+        if role in clients:
+            retry, cred = clients[role]
+            return cls(mode="client", connect=(ep,), listen=(), retry=retry, credential=cred, secure_dir=secure_dir)
         raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
+
+    def check_secure(self) -> security.Credential | None:
+        """The credential files of a secure session (BusError if missing or if an endpoint is not tls/)."""
+        if not self.secure_dir:
+            return None
+        plain = [e for e in (*self.connect, *self.listen) if not e.startswith("tls/")]
+        if plain:
+            raise BusError(
+                f"--secure needs tls/ endpoints (e.g. {DEFAULT_SECURE_ENDPOINT}), not {', '.join(plain)}: "
+                "anything else would bypass mutual TLS"
+            )
+        try:
+            return security.credential(self.secure_dir, self.credential)
+        except ValueError as e:
+            raise BusError(str(e)) from None
 
     def zenoh_config(self) -> zenoh.Config:
         if self.mode not in ("router", "peer", "client"):
@@ -73,12 +118,32 @@ class BusConfig:
         cfg.insert_json5("scouting/gossip/enabled", "false" if self.mode != "router" else "true")
         if self.lease_ms:
             cfg.insert_json5("transport/link/tx/lease", str(int(self.lease_ms)))
+        cred = self.check_secure()
+        if cred is not None:
+            tls = {
+                "root_ca_certificate": cred.ca,
+                "enable_mtls": True,
+                "connect_certificate": cred.cert,
+                "connect_private_key": cred.key,
+                "verify_name_on_connect": True,
+            }
+            if self.listen:
+                tls.update(listen_certificate=cred.cert, listen_private_key=cred.key)
+            for k, v in tls.items():
+                cfg.insert_json5(f"transport/link/tls/{k}", json.dumps(v))
+            if self.mode != "client":  # routers and peers accept connections: they enforce the rules
+                cfg.insert_json5("access_control", json.dumps(security.acl_rules()))
         return cfg
 
     def describe(self) -> str:
         ends = ",".join(self.listen if self.mode == "router" else self.connect) or "-"
         wait = " (waits for it)" if self.retry and self.mode == "client" else ""
-        return f"{self.mode} {'listening on' if self.mode == 'router' else 'connecting to'} {ends}{wait}"
+        sec = f", mutual TLS as {security.common_name(self.credential)}" if self.secure_dir else ""
+        return f"{self.mode} {'listening on' if self.mode == 'router' else 'connecting to'} {ends}{wait}{sec}"
+
+    def exposure_warning(self) -> str | None:
+        """A warning when this is a router listening beyond loopback without `--secure`."""
+        return security.exposure_warning(self.mode, self.listen, bool(self.secure_dir))
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser, role: str) -> None:
@@ -123,10 +188,21 @@ def add_bus_arguments(parser: argparse.ArgumentParser, role: str) -> None:
         action="store_true",
         help="enable multicast scouting (off by default: it reaches beyond this machine)",
     )
+    cred = d.credential
+    what = "listens with mutual TLS and enforces access control" if role == "agent" else "presents"
+    g.add_argument(
+        "--secure",
+        default=None,
+        metavar="DIR",
+        help=f"locked-down bus with the credentials of `sme secure init DIR`: this command {what} "
+        f"(certificate {cred}.pem, common name {security.common_name(cred)}); endpoints must be tls/ "
+        f"(default {DEFAULT_SECURE_ENDPOINT})",
+    )
 
 
 def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
-    cfg = BusConfig.for_role(role)
+    """The session of a command of `role` from its parsed bus arguments (see `add_bus_arguments`)."""
+    cfg = BusConfig.for_role(role, secure_dir=getattr(args, "secure", None))
     if args.mode:
         cfg = replace(cfg, mode=args.mode)
     if args.connect is not None:

@@ -6,6 +6,7 @@ import re
 
 PREFIX = "sme/v1"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+DEFAULT_SECURE_ENDPOINT = "tls/127.0.0.1:7447"  # with --secure DIR: mutual TLS + access control
 DEFAULT_AGENT_ID = "a0"
 
 _ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")

@@ -157,6 +157,7 @@ MINIMAL_ARGS = {
     "replay": ["x.mcap"],
     "recover": ["a.mcap", "b.mcap"],
     "reproduce": ["gridworld"],
+    "secure init": ["DIR"],
 }
 
 

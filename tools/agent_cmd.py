@@ -100,6 +100,9 @@ def run_agent(args: argparse.Namespace) -> int:
         print(f"sme agent: {e}", file=sys.stderr)
         return 2
     cfg = bus_config_from_args(args, "agent")
+    warning = cfg.exposure_warning()
+    if warning:
+        print(f"sme agent: WARNING: {warning}", file=sys.stderr, flush=True)
     try:
         bus = Bus(cfg)
     except BusError as e:

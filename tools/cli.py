@@ -12,7 +12,19 @@ import sys
 import textwrap
 from collections.abc import Iterator
 
-from sensorimotor.tools import agent_cmd, demo, perturb, record, replay, reproduce, status, view, watch, world_cmd
+from sensorimotor.tools import (
+    agent_cmd,
+    demo,
+    perturb,
+    record,
+    replay,
+    reproduce,
+    secure,
+    status,
+    view,
+    watch,
+    world_cmd,
+)
 from sensorimotor.tools.bench import cli as bench_cli
 from sensorimotor.tools.common import (
     EXIT_CODES_EPILOG,
@@ -48,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_verbosity(p)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    for mod in (agent_cmd, world_cmd, perturb, watch, status, record, replay, view, demo, reproduce, bench_cli):
+    for mod in (agent_cmd, world_cmd, perturb, watch, status, record, replay, view, demo, reproduce, bench_cli, secure):
         mod.add_parser(sub)
     replay.add_recover_parser(sub)
     for child in _subparsers(p):

@@ -39,9 +39,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of world and agent")
     p.add_argument(
         "--listen",
-        default=keys.DEFAULT_ENDPOINT,
+        default=None,
         metavar="ENDPOINT",
-        help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT})",
+        help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT}, with --secure {keys.DEFAULT_SECURE_ENDPOINT})",
+    )
+    p.add_argument(
+        "--secure",
+        default=None,
+        metavar="DIR",
+        help="run on a locked-down bus with the credentials of `sme secure init DIR`: the agent listens "
+        "with mutual TLS and access control (agent credential), the world connects with the world credential",
     )
     p.set_defaults(func=main_args, log_default=-1)  # quiet logs unless -v: the demo prints its own progress
 
@@ -83,20 +90,27 @@ def main_args(args: argparse.Namespace) -> int:
         elif isinstance(msg, AgentEvent) and msg.kind not in ("policy_iteration", "paused"):
             say(stamp + format_event(msg))
 
+    agent_cfg = BusConfig.for_role("agent", args.listen, args.secure)
+    endpoint = agent_cfg.listen[0]
+    warning = agent_cfg.exposure_warning()
+    if warning:
+        print(f"sme demo: WARNING: {warning}", file=sys.stderr, flush=True)
     try:
-        agent_bus = Bus(BusConfig.for_role("agent", args.listen))
+        agent_bus = Bus(agent_cfg)
     except BusError as e:
         print(f"sme demo: {e}", file=sys.stderr)
         return 2
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    say(f"sme demo: agent on {args.listen}, world {wid!r} ({world.kind}), {args.seconds:g} s; Ctrl-C stops")
+    say(
+        f"sme demo: agent on {endpoint}{' (mutual TLS + access control)' if args.secure else ''}, world {wid!r} ({world.kind}), {args.seconds:g} s; Ctrl-C stops"
+    )
     with agent_bus, world:
         daemon = AgentDaemon(agent_bus, seed=args.seed, on_output=on_output)
         daemon.start()
         dthread = threading.Thread(target=daemon.run, daemon=True)
         dthread.start()
-        with Bus(BusConfig.for_role("world", args.listen)) as world_bus:
+        with Bus(BusConfig.for_role("world", endpoint, args.secure)) as world_bus:
             node = WorldNode(world, world_bus, wid, max_steps=args.steps)
             nthread = threading.Thread(target=node.run, daemon=True)
             nthread.start()

@@ -72,7 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="morph: cameras one above the other (--no-vertical: side by side)",
     )
-    add_bus_arguments(p, "tool")
+    add_bus_arguments(p, "perturb")
     p.set_defaults(func=main_args)
 
 
@@ -102,7 +102,7 @@ def main_args(args: argparse.Namespace) -> int:
             params["vertical"] = str(args.vertical).lower()
     ctl = Control(args.world, args.kind, params, time.time_ns() & 0xFFFFFFFF, time.time())
     try:
-        with Bus(bus_config_from_args(args, "tool")) as bus:
+        with Bus(bus_config_from_args(args, "perturb")) as bus:
             if not bus.alive(keys.alive_world(args.world), timeout=2.0):
                 print(f"sme perturb: no world {args.world!r} is alive on the bus (see `sme status`)", file=sys.stderr)
                 return 1

@@ -210,7 +210,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--compression", choices=sorted(COMPRESSIONS), default="zstd", help="chunk compression")
     p.add_argument("--chunk-kb", type=int, default=64, help="chunk size in KB (smaller loses less on a kill)")
-    add_bus_arguments(p, "world")
+    add_bus_arguments(p, "reader")
     p.set_defaults(func=main_args)
 
 
@@ -221,7 +221,7 @@ def main_args(args: argparse.Namespace) -> int:
         print(f"sme record: {e.strerror or e}", file=sys.stderr)
         return 2
     try:
-        bus = Bus(bus_config_from_args(args, "world"), wait_limit=args.seconds)
+        bus = Bus(bus_config_from_args(args, "reader"), wait_limit=args.seconds)
     except BusError as e:
         out.close()
         print(f"sme record: {e}", file=sys.stderr)

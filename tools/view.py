@@ -132,7 +132,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seconds", type=float, default=None, help="live: stop after this many seconds")
     p.add_argument("--agent", default=keys.DEFAULT_AGENT_ID, help="agent whose status is polled (default a0)")
-    add_bus_arguments(p, "world")
+    add_bus_arguments(p, "reader")
     p.set_defaults(func=main_args)
 
 
@@ -158,7 +158,7 @@ def main_args(args: argparse.Namespace) -> int:
         print(f"sme view: {log.logged} entities logged from {args.file}", file=sys.stderr)
         return 0
     try:
-        bus = Bus(bus_config_from_args(args, "world"), wait_limit=args.seconds)
+        bus = Bus(bus_config_from_args(args, "reader"), wait_limit=args.seconds)
     except BusError as e:
         print(f"sme view: {e}", file=sys.stderr)
         return 2

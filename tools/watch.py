@@ -46,13 +46,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--agent", default="*", help="agent id to watch (default: all)")
     p.add_argument("--world", default="*", help="world id to watch (default: all)")
     p.add_argument("--no-events", action="store_true", help="embeddings only")
-    add_bus_arguments(p, "world")
+    add_bus_arguments(p, "reader")
     p.set_defaults(func=main_args)
 
 
 def main_args(args: argparse.Namespace) -> int:
     try:
-        bus = Bus(bus_config_from_args(args, "world"), wait_limit=args.timeout)
+        bus = Bus(bus_config_from_args(args, "reader"), wait_limit=args.timeout)
     except BusError as e:
         print(f"sme watch: {e}", file=sys.stderr)
         return 2
