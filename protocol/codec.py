@@ -294,9 +294,11 @@ def _dec_spec(p: pb.WorldSpec) -> m.WorldSpec:
         raise errors.MalformedMessage("WorldSpec action_space: neither discrete_n > 0 nor matching low/high bounds")
     if max(len(a.low), len(a.high), len(a.names)) > MAX_TENSORS:
         raise errors.OversizeMessage(f"WorldSpec action_space: more than {MAX_TENSORS} dimensions or names")
+    for v in a.low:
+        _finite(v, "WorldSpec action_space low")
+    for v in a.high:
+        _finite(v, "WorldSpec action_space high")
     for lo, hi in zip(a.low, a.high, strict=False):
-        _finite(lo, "WorldSpec action_space low")
-        _finite(hi, "WorldSpec action_space high")
         if lo > hi:
             raise errors.MalformedMessage(f"WorldSpec action_space: low {lo} > high {hi}")
     _not_nan(p.reward_min, "WorldSpec reward_min")
