@@ -240,8 +240,8 @@ def decode_checkpoint(data: bytes) -> Checkpoint:
         if raw.dtype != np.uint8 or raw.ndim != 1:
             raise ValueError(f"{META_ENTRY} is {raw.dtype}{list(raw.shape)}, not bytes")
         meta = json.loads(raw.tobytes().decode("utf-8"))
-    except (ValueError, UnicodeDecodeError) as e:
-        raise CheckpointError(f"its {META_ENTRY} entry is not valid JSON: {e}") from None
+    except (ValueError, UnicodeDecodeError, RecursionError) as e:  # RecursionError: hostile nesting
+        raise CheckpointError(f"its {META_ENTRY} entry is not valid JSON: {type(e).__name__}: {e}") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(
             f"not a sensorimotor checkpoint (format {meta.get('format') if isinstance(meta, dict) else None!r})"
@@ -272,6 +272,15 @@ def decode_checkpoint(data: bytes) -> Checkpoint:
     detector = meta.get("detector_state")
     if detector is not None and not isinstance(detector, dict):
         raise CheckpointError("the entry 'detector_state' has the wrong type")
+    try:
+        return _checkpoint(meta, sensors, action_space, detector, arrays)
+    except RecursionError:  # JSON nested just under json's limit, deeper than the stack left here
+        raise CheckpointError("the state entries are nested too deeply") from None
+
+
+def _checkpoint(
+    meta: dict, sensors: tuple[SensorSpec, ...], action_space: ActionSpace, detector: Any, arrays: dict[str, np.ndarray]
+) -> Checkpoint:
     return Checkpoint(
         world_id=_require(meta, "world_id", str),
         kind=_require(meta, "kind", str),

@@ -26,11 +26,11 @@ from sensorimotor.agent.checkpoint import (
     write_atomically,
 )
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
-from sensorimotor.agent.link import WorldLink
+from sensorimotor.agent.link import WorldLink, check_truth
 from sensorimotor.agent.programs.registry import check_program_params, make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
-from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
 from sensorimotor.protocol.messages import (
     Action,
     AgentEvent,
@@ -160,22 +160,31 @@ class AgentDaemon:
     def _on_alive(self, key: str, alive: bool) -> None:
         self._changes.put((keys.last_chunk(key), alive))
 
+    # truth and world events for a world without a link are counted as `unattached`, like its
+    # observations; a refused one as bad_truth / bad_world_event (the link keeps its truth)
     def _on_truth(self, msg: BusMessage) -> None:
         link = self.links.get(keys.world_of(msg.key))
         if link is None:
+            self.counters["unattached"] += 1
             return
         try:
-            link.truth = codec.decode(Truth, msg.payload)
+            truth = codec.decode(Truth, msg.payload)
+            check_truth(truth, link.world_id)
         except ProtocolError as e:
             self.counters["bad_truth"] += 1
             log.warning("world %s: bad truth message: %s", link.world_id, e)
+            return
+        link.truth = truth
 
     def _on_world_event(self, msg: BusMessage) -> None:
         link = self.links.get(keys.world_of(msg.key))
         if link is None:
+            self.counters["unattached"] += 1
             return
         try:
             ev = codec.decode(WorldEvent, msg.payload)
+            if ev.world_id != link.world_id:
+                raise SpecMismatch(f"world event for world {ev.world_id!r} arrived on {link.world_id!r}'s key")
         except ProtocolError as e:
             self.counters["bad_world_event"] += 1
             log.warning("world %s: bad world event: %s", link.world_id, e)
@@ -310,6 +319,8 @@ class AgentDaemon:
             spec = self._fetch(keys.world_spec(wid), WorldSpec)
             if spec is None:
                 raise BusError("no reply to the spec query")
+            if spec.world_id != wid:
+                raise SpecMismatch(f"the spec of world {wid!r} is for world {spec.world_id!r}")
         except ProtocolError as e:
             self._attach_failed(wid, "bad_spec", e)
             return
@@ -322,9 +333,15 @@ class AgentDaemon:
             truth = None
         previous = self.links.get(wid)
         restored = None if previous is not None and same_body(previous.spec, spec) else self._load_checkpoint(spec)
+        if truth is not None:
+            try:
+                check_truth(truth, wid)
+            except ProtocolError as e:
+                log.warning("world %s: truth not used: %s", wid, e)
+                truth = None
         try:
             att = attach(spec, self.config, self.publish, truth=truth, previous=previous, restored=restored)
-        except (ValueError, TypeError, ProtocolError) as e:
+        except Exception as e:  # noqa: BLE001 - no program fits this spec (KeyError, MemoryError, ...); the daemon goes on
             self._attach_failed(wid, "no_program", e)
             return
         if previous is not None and att.link is not previous:

@@ -52,6 +52,18 @@ def check_against_spec(obs: Observation, spec: WorldSpec) -> None:
             )
 
 
+def check_truth(truth: Truth, world_id: str) -> None:
+    """Raise SpecMismatch unless `truth` is this world's (its world id) and holds `positions` as a
+    2-D float array (row i = start state or point i), the only tensor the evaluation reads. A truth
+    that fails would otherwise replace the good one and break every later score."""
+    if truth.world_id != world_id:
+        raise SpecMismatch(f"truth for world {truth.world_id!r} arrived on {world_id!r}'s key")
+    pos = truth.tensors.get("positions")
+    if pos is None or pos.ndim != 2 or pos.dtype.kind != "f":
+        what = "no 'positions'" if pos is None else f"'positions' {pos.dtype.name}{list(pos.shape)}"
+        raise SpecMismatch(f"truth of world {world_id!r} has {what}; expected a 2-D float array")
+
+
 @dataclass
 class LinkCounters:
     """What a link has seen and done: counts of steps, episodes, rejected inputs, embeddings, drops."""

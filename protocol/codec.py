@@ -41,6 +41,12 @@ SCHEMA_NAMES = {
 }
 
 
+def _not_nan(value: float, what: str) -> float:
+    if math.isnan(value):
+        raise errors.NonFiniteValue(f"{what} is NaN; a bound may be infinite, never NaN")
+    return value
+
+
 def _finite(value: float, what: str) -> float:
     if not math.isfinite(value):
         raise errors.NonFiniteValue(f"{what} is {value!r}; only finite numbers are accepted")
@@ -253,14 +259,50 @@ def _enc_status(x: m.AgentStatus) -> pb.AgentStatus:
 
 
 def _dec_spec(p: pb.WorldSpec) -> m.WorldSpec:
+    # A spec promises what every observation will look like: refuse one that no valid observation
+    # could meet (more sensors than an observation may carry, a shape over the tensor limits), with
+    # NaN bounds, or with an action box that is not finite, instead of building a program from it.
+    # Sensor and reward bounds may be infinite (an unbounded sensor, Gymnasium's default reward range).
+    if len(p.sensors) > MAX_TENSORS:
+        raise errors.OversizeMessage(f"WorldSpec: {len(p.sensors)} sensors, at most {MAX_TENSORS}")
     sensors = []
     for s in p.sensors:
-        if s.dtype not in DTYPES:
+        dt = DTYPES.get(s.dtype)
+        if dt is None:
             raise errors.BadDtype(f"WorldSpec sensor {s.name!r} has dtype {s.dtype!r}; allowed: {sorted(DTYPES)}")
-        sensors.append(m.SensorSpec(s.name, s.dtype, tuple(s.shape), s.low, s.high, s.description))
+        if any(x.name == s.name for x in sensors):
+            raise errors.MalformedMessage(f"WorldSpec: sensor name {s.name!r} appears twice")
+        if len(s.shape) > MAX_DIMS:
+            raise errors.ShapeMismatch(f"WorldSpec sensor {s.name!r} has {len(s.shape)} dimensions, at most {MAX_DIMS}")
+        if math.prod(s.shape) * dt.itemsize > MAX_TENSOR_BYTES:
+            raise errors.OversizeMessage(
+                f"WorldSpec sensor {s.name!r} shape {list(s.shape)} is over {MAX_TENSOR_BYTES} bytes"
+            )
+        where = f"WorldSpec sensor {s.name!r}"
+        sensors.append(
+            m.SensorSpec(
+                s.name,
+                s.dtype,
+                tuple(s.shape),
+                _not_nan(s.low, f"{where} low"),
+                _not_nan(s.high, f"{where} high"),
+                s.description,
+            )
+        )
     a = p.action_space
     if a.discrete_n == 0 and (len(a.low) == 0 or len(a.low) != len(a.high)):
         raise errors.MalformedMessage("WorldSpec action_space: neither discrete_n > 0 nor matching low/high bounds")
+    if max(len(a.low), len(a.high), len(a.names)) > MAX_TENSORS:
+        raise errors.OversizeMessage(f"WorldSpec action_space: more than {MAX_TENSORS} dimensions or names")
+    for v in a.low:
+        _finite(v, "WorldSpec action_space low")
+    for v in a.high:
+        _finite(v, "WorldSpec action_space high")
+    for lo, hi in zip(a.low, a.high, strict=False):
+        if lo > hi:
+            raise errors.MalformedMessage(f"WorldSpec action_space: low {lo} > high {hi}")
+    _not_nan(p.reward_min, "WorldSpec reward_min")
+    _not_nan(p.reward_max, "WorldSpec reward_max")
     return m.WorldSpec(
         world_id=p.world_id,
         kind=p.kind,

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from google.protobuf.message import DecodeError
+
+from sensorimotor.protocol import errors
 
 SCHEMA = "foxglove.RawImage"
 
@@ -25,13 +28,24 @@ def encode_image(frame: np.ndarray, frame_id: str, timestamp: float) -> bytes:
     return m.SerializeToString()
 
 
-def decode_image(payload: bytes) -> np.ndarray:
+def decode_image(payload: bytes | bytearray | memoryview) -> np.ndarray:
+    """Serialized foxglove.RawImage (mono8 or rgb8) -> uint8 [H, W] or [H, W, 3].
+
+    Raises a `ProtocolError` (a ValueError): `MalformedMessage` for bytes that are not a RawImage
+    or an encoding other than mono8/rgb8, `ShapeMismatch` when the data is not height x width x
+    channels bytes (or `step` disagrees with the width).
+    """
     m = RawImage()
-    m.ParseFromString(payload)
+    try:
+        m.ParseFromString(bytes(payload))
+    except (DecodeError, RuntimeError, ValueError) as e:
+        raise errors.MalformedMessage(f"RawImage: not a valid protobuf message ({e})") from None
     ch = {"mono8": 1, "rgb8": 3}.get(m.encoding)
     if ch is None:
-        raise ValueError(f"unsupported image encoding {m.encoding!r}")
+        raise errors.MalformedMessage(f"unsupported image encoding {m.encoding!r}")
+    if m.height * m.width * ch != len(m.data) or (m.height and m.step != m.width * ch):
+        raise errors.ShapeMismatch(
+            f"image data ({len(m.data)} bytes, step {m.step}) does not match {m.width} x {m.height} x {ch}"
+        )
     a = np.frombuffer(m.data, dtype=np.uint8)
-    if a.size != m.height * m.width * ch:
-        raise ValueError("image data does not match width x height")
     return a.reshape((m.height, m.width) if ch == 1 else (m.height, m.width, 3))

@@ -9,12 +9,12 @@ DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 DEFAULT_SECURE_ENDPOINT = "tls/127.0.0.1:7447"  # with --secure DIR: mutual TLS + access control
 DEFAULT_AGENT_ID = "a0"
 
-_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 
 
 def check_id(value: str, what: str = "id") -> str:
     """Ids become key-expression chunks: refuse anything that could widen or break a key."""
-    if not isinstance(value, str) or not _ID.match(value):
+    if not isinstance(value, str) or not _ID.fullmatch(value):  # fullmatch: "$" would let "g1\n" in
         raise ValueError(f"invalid {what} {value!r}: use 1-64 characters from A-Z a-z 0-9 _ . -")
     return value
 
