@@ -8,15 +8,16 @@ import argparse
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench",
-        help="benchmarks (loop, embedding, record, detectors, world)",
+        help="benchmarks (loop, embedding, record, detectors, world, soak)",
         description="Run a benchmark; see its --help.",
     )
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
-    from sensorimotor.tools.bench import detectors, embedding, loop, record, world
+    from sensorimotor.tools.bench import detectors, embedding, loop, record, soak, world
 
     loop.add_parser(bsub)
     embedding.add_parser(bsub)
     record.add_parser(bsub)
     detectors.add_parser(bsub)
     world.add_parser(bsub)
+    soak.add_parser(bsub)
     p.set_defaults(func=lambda a: p.print_help() or 2)
