@@ -89,7 +89,7 @@ def flood(endpoint: str, wid: str, seconds: float) -> None:
         p = cycle[sent % len(cycle)]
         p.step = sent
         data = p.SerializeToString()
-        end = time.monotonic() + 30
+        end = time.monotonic() + 90  # the agent first answers the backlog zenoh holds (slow under load)
         while last_answer[0] != sent and time.monotonic() < end:
             pub.put(data)
             time.sleep(0.5)
