@@ -3,7 +3,10 @@ world's developmental program, answers a status queryable, checkpoints, stops cl
 
 A world that vanishes pauses its link; when it returns (same id) the link resumes with everything
 the program learned. With `state_dir`, each link's program is checkpointed atomically and picked up
-again by a daemon started later.
+again by a daemon started later. A world gone longer than `link_ttl` seconds has its link
+checkpointed (with `state_dir`) and released from memory, so worlds that come and go do not pile up
+links; if it returns, it is attached again through the normal path (restored from its checkpoint,
+or fresh without a state dir).
 """
 
 from __future__ import annotations
@@ -89,6 +92,7 @@ class AgentDaemon:
         on_output: Callable[[str, Any], None] | None = None,
         threaded_links: bool = False,
         detector: str = DEFAULT_DETECTOR,
+        link_ttl: float | None = 600.0,
     ) -> None:
         make_detector(detector)  # fail early on an unknown name
         self.detector = detector
@@ -102,7 +106,18 @@ class AgentDaemon:
         self.config = AgentConfig(self.agent_id, seed, detector, self.program_params)
         self.on_output = on_output
         self.links: dict[str, WorldLink] = {}
-        self.counters: dict[str, int] = {"unattached": 0, "attach_failed": 0, "bad_truth": 0, "bad_world_event": 0}
+        self.counters: dict[str, int] = {
+            "unattached": 0,
+            "attach_failed": 0,
+            "bad_truth": 0,
+            "bad_world_event": 0,
+            "released": 0,  # links of worlds gone longer than link_ttl, released from memory
+            "dropped": 0,  # observations dropped unanswered (flood); here those of released links
+        }
+        if link_ttl is not None and link_ttl <= 0:
+            raise ValueError(f"link_ttl must be > 0 seconds (or None: never release), not {link_ttl}")
+        self.link_ttl = link_ttl
+        self._gone: dict[str, float] = {}  # world id -> time.monotonic() when its token vanished
         self._changes: queue.Queue[tuple[str, bool]] = queue.Queue()
         self._stop = threading.Event()
         self._started = time.time()
@@ -119,6 +134,18 @@ class AgentDaemon:
                 pub = self._pubs.get(key) or self.bus.publisher(key, schema)
                 self._pubs[key] = pub
         return pub
+
+    def _forget_publishers(self, wid: str) -> None:
+        """Undeclare the publishers declared for world `wid` (its link was released)."""
+        for key in (
+            keys.world_act(wid),
+            keys.agent_embedding(self.agent_id, wid),
+            keys.agent_event(self.agent_id, wid),
+        ):
+            with self._lock:
+                pub = self._pubs.pop(key, None)
+            if pub is not None:
+                self.bus.undeclare(pub._pub)
 
     def publish(self, channel: str, msg: Any) -> None:
         """Publish a link's message on its channel's key (and pass embeddings and events to `on_output`)."""
@@ -197,7 +224,10 @@ class AgentDaemon:
     def status(self) -> AgentStatus:
         """The agent's status: uptime, every link's status and the daemon's counters."""
         links = tuple(link.status() for link in list(self.links.values()))
-        return AgentStatus(self.agent_id, time.time() - self._started, links, dict(self.counters), time.time())
+        counters = dict(self.counters)
+        counters["dropped"] += sum(ln.dropped for ln in links)
+        counters["links"] = len(links)
+        return AgentStatus(self.agent_id, time.time() - self._started, links, counters, time.time())
 
     # attach / pause ----------------------------------------------------------------------------
     def _fetch(self, key: str, cls: type, tries: int = 3) -> Any:
@@ -282,12 +312,17 @@ class AgentDaemon:
             return None
         return Restored(program, saved.version, detector)
 
-    def checkpoint(self) -> None:
-        """Write every link's learned state to STATE_DIR/<world>.ckpt.npz (atomically, no pickle)."""
+    def checkpoint(self, only: str | None = None) -> set[str]:
+        """Write every link's learned state (or only world `only`'s) to STATE_DIR/<world>.ckpt.npz
+        (atomically, no pickle). A write that fails (e.g. a full disk) is logged and leaves the
+        previous checkpoint in place. Returns the ids of the worlds written."""
+        written: set[str] = set()
         state_dir = self.state_dir
         if not state_dir:
-            return
+            return written
         for wid, link in list(self.links.items()):
+            if only is not None and wid != only:
+                continue
             path = self._checkpoint_path(state_dir, wid)
             with link.lock:  # a consistent snapshot (copies): the file is written while the link runs on
                 program, spec = link.program, link.spec
@@ -310,10 +345,13 @@ class AgentDaemon:
                 continue
             try:
                 write_atomically(path, data)
+                written.add(wid)
             except OSError as e:  # e.g. a full disk: the previous checkpoint stays, learning goes on
                 log.error("world %s: checkpoint not written (%s); the previous one is kept", wid, e)
+        return written
 
     def _attach(self, wid: str) -> None:
+        self._gone.pop(wid, None)
         try:
             keys.check_id(wid, "world id")
             spec = self._fetch(keys.world_spec(wid), WorldSpec)
@@ -366,10 +404,57 @@ class AgentDaemon:
 
     def _detach(self, wid: str) -> None:
         link = self.links.get(wid)
+        if link is not None:
+            self._gone[wid] = time.monotonic()
         if link is not None and link.state == "attached":
             link.pause()
             log.info("world %s disappeared: link paused at step %d", wid, link.counters.steps)
             link.event(EventKind.PAUSED, "world vanished; waiting for it to return", reason="world_gone")
+
+    def release_expired(self, now: float | None = None) -> list[str]:
+        """Release the links of worlds gone longer than `link_ttl`: checkpoint each (with a state
+        dir) and drop it from `links`. A link whose checkpoint cannot be written is kept (and tried
+        again at the next sweep): releasing it would lose what it learned. Returns the released ids."""
+        if self.link_ttl is None:
+            return []
+        now = time.monotonic() if now is None else now
+        released = []
+        for wid, since in list(self._gone.items()):
+            link = self.links.get(wid)
+            if link is None:
+                self._gone.pop(wid, None)
+                continue
+            if now - since < self.link_ttl or link.state == "attached":
+                continue
+            if self.state_dir and wid not in self.checkpoint(only=wid):
+                log.warning("world %s: gone %.0f s but its checkpoint failed; link kept", wid, now - since)
+                continue
+            if self._gone.pop(wid, None) is None or self.links.get(wid) is not link:
+                continue  # it came back meanwhile
+            del self.links[wid]
+            link.stop()
+            self._forget_publishers(wid)
+            self.counters["released"] += 1
+            self.counters["dropped"] += link.dropped
+            released.append(wid)
+            if self.state_dir:
+                log.info(
+                    "world %s gone %.0f s (link ttl %g s): checkpointed to %s and released; it is restored "
+                    "from there if it returns",
+                    wid,
+                    now - since,
+                    self.link_ttl,
+                    self._checkpoint_path(self.state_dir, wid),
+                )
+            else:
+                log.info(
+                    "world %s gone %.0f s (link ttl %g s): link released; no --state-dir, so it starts fresh "
+                    "if it returns",
+                    wid,
+                    now - since,
+                    self.link_ttl,
+                )
+        return released
 
     # main loop ---------------------------------------------------------------------------------
     def start(self) -> None:
@@ -384,7 +469,8 @@ class AgentDaemon:
     def run(self, seconds: float | None = None) -> None:
         """Process attach/detach until stop() or `seconds` elapse."""
         t0 = time.monotonic()
-        last_ckpt = t0
+        last_ckpt = last_sweep = t0
+        sweep_every = min(1.0, self.link_ttl / 2) if self.link_ttl is not None else None
         while not self._stop.is_set():
             if seconds is not None and time.monotonic() - t0 >= seconds:
                 break
@@ -397,6 +483,9 @@ class AgentDaemon:
                     self._attach(wid)
                 else:
                     self._detach(wid)
+            if sweep_every is not None and time.monotonic() - last_sweep >= sweep_every:
+                self.release_expired()
+                last_sweep = time.monotonic()
             if self.state_dir and time.monotonic() - last_ckpt >= self.checkpoint_every:
                 self.checkpoint()
                 last_ckpt = time.monotonic()

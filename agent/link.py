@@ -72,6 +72,7 @@ class LinkCounters:
     episodes: int = 0
     duplicates: int = 0
     stale: int = 0
+    dropped: int = 0  # steps never answered: gaps in the world's step counter (a flood lost on the way)
     rejected: dict[str, int] = field(default_factory=dict)
     program_errors: int = 0
     world_events: dict[str, int] = field(default_factory=dict)
@@ -256,6 +257,11 @@ class WorldLink:
         if obs.step < self._last_step:
             self.counters.stale += 1
             return None
+        if self._last_step >= 0 and obs.step > self._last_step + 1:
+            # A lockstep world publishes k+1 only after our answer to k: the steps in between never
+            # reached us (a world that does not wait, its publisher dropping under congestion) or were
+            # dropped from the bounded inbox. Memory stays bounded either way; count what was lost.
+            self.counters.dropped += obs.step - self._last_step - 1
         try:
             dec = self.program.act(obs)
             self._failures = 0
@@ -361,6 +367,11 @@ class WorldLink:
         elif isinstance(item, EventOutput):
             self.event(item.kind, item.detail, item.step, item.values, reason=item.reason)
 
+    @property
+    def dropped(self) -> int:
+        """Observation steps of this world never answered (see LinkCounters.dropped)."""
+        return self.counters.dropped
+
     def status(self) -> LinkStatus:
         """The link's `LinkStatus` for the agent's status queryable."""
         c = self.counters
@@ -378,4 +389,5 @@ class WorldLink:
             c.last_error,
             stat,
             c.drops,
+            c.dropped,
         )

@@ -249,6 +249,7 @@ def _enc_status(x: m.AgentStatus) -> pb.AgentStatus:
             last_procrustes_error=ln.last_procrustes_error,
             detector_statistic=ln.detector_statistic,
             drops=ln.drops,
+            dropped=ln.dropped,
         )
         q.rejected.update(ln.rejected)
     p.counters.update(x.counters)
@@ -394,6 +395,7 @@ def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
             ln.last_procrustes_error,
             ln.detector_statistic,
             ln.drops,
+            ln.dropped,
         )
         for ln in p.links
     )

@@ -202,6 +202,7 @@ class LinkStatus:
     last_procrustes_error: float = float("nan")
     detector_statistic: float = 0.0
     drops: int = 0
+    dropped: int = 0
 
 
 @dataclass(frozen=True)

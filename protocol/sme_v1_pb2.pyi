@@ -274,7 +274,7 @@ class WorldEvent(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., kind: _Optional[str] = ..., reason: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ...) -> None: ...
 
 class LinkStatus(_message.Message):
-    __slots__ = ("world_id", "kind", "program", "state", "steps", "episodes", "embedding_version", "reward_mean", "rejected", "last_procrustes_error", "detector_statistic", "drops")
+    __slots__ = ("world_id", "kind", "program", "state", "steps", "episodes", "embedding_version", "reward_mean", "rejected", "last_procrustes_error", "detector_statistic", "drops", "dropped")
     class RejectedEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -294,6 +294,7 @@ class LinkStatus(_message.Message):
     LAST_PROCRUSTES_ERROR_FIELD_NUMBER: _ClassVar[int]
     DETECTOR_STATISTIC_FIELD_NUMBER: _ClassVar[int]
     DROPS_FIELD_NUMBER: _ClassVar[int]
+    DROPPED_FIELD_NUMBER: _ClassVar[int]
     world_id: str
     kind: str
     program: str
@@ -306,7 +307,8 @@ class LinkStatus(_message.Message):
     last_procrustes_error: float
     detector_statistic: float
     drops: int
-    def __init__(self, world_id: _Optional[str] = ..., kind: _Optional[str] = ..., program: _Optional[str] = ..., state: _Optional[str] = ..., steps: _Optional[int] = ..., episodes: _Optional[int] = ..., embedding_version: _Optional[int] = ..., reward_mean: _Optional[float] = ..., rejected: _Optional[_Mapping[str, int]] = ..., last_procrustes_error: _Optional[float] = ..., detector_statistic: _Optional[float] = ..., drops: _Optional[int] = ...) -> None: ...
+    dropped: int
+    def __init__(self, world_id: _Optional[str] = ..., kind: _Optional[str] = ..., program: _Optional[str] = ..., state: _Optional[str] = ..., steps: _Optional[int] = ..., episodes: _Optional[int] = ..., embedding_version: _Optional[int] = ..., reward_mean: _Optional[float] = ..., rejected: _Optional[_Mapping[str, int]] = ..., last_procrustes_error: _Optional[float] = ..., detector_statistic: _Optional[float] = ..., drops: _Optional[int] = ..., dropped: _Optional[int] = ...) -> None: ...
 
 class AgentStatus(_message.Message):
     __slots__ = ("schema_version", "agent_id", "uptime", "links", "counters", "timestamp")

@@ -38,6 +38,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--checkpoint-every", type=float, default=30.0, metavar="S", help="checkpoint period (s)")
     p.add_argument(
+        "--link-ttl",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="release the link of a world gone longer than S seconds (default: 600): checkpointed first "
+        "with --state-dir and restored from there if the world returns, else it starts fresh",
+    )
+    p.add_argument(
         "--detector",
         default=DEFAULT_DETECTOR,
         choices=sorted(DETECTORS),
@@ -99,6 +107,9 @@ def run_agent(args: argparse.Namespace) -> int:
     except ParamError as e:
         print(f"sme agent: {e}", file=sys.stderr)
         return 2
+    if not args.link_ttl > 0:
+        print(f"sme agent: --link-ttl must be > 0 seconds, not {args.link_ttl}", file=sys.stderr)
+        return 2
     cfg = bus_config_from_args(args, "agent")
     warning = cfg.exposure_warning()
     if warning:
@@ -117,6 +128,7 @@ def run_agent(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every,
             detector=args.detector,
             program_params=program_params,
+            link_ttl=args.link_ttl,
         )
         stop = threading.Event()
 

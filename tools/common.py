@@ -185,6 +185,7 @@ def status_dict(s: AgentStatus) -> dict[str, Any]:
                 "last_procrustes_error": _num(ln.last_procrustes_error),
                 "detector_statistic": _num(ln.detector_statistic),
                 "drops": ln.drops,
+                "dropped": ln.dropped,
             }
             for ln in s.links
         ],

@@ -54,7 +54,7 @@ def main_args(args: argparse.Namespace) -> int:
             f"  world {ln['world']:<12} {ln['kind']:<10} {ln['state']:<8} program={ln['program']:<10} "
             f"steps={ln['steps']:<8} episodes={ln['episodes']:<6} embedding v{ln['embedding_version']:<4} "
             f"procrustes={'n/a' if err is None else f'{err:.4f}'} reward_mean={ln['reward_mean']:.4f} "
-            f"rejected={ln['rejected'] or '{}'}"
+            f"rejected={ln['rejected'] or '{}'} dropped={ln['dropped']}"
         )
     if not d["links"]:
         print("  no worlds attached (start one with `sme world gridworld`)")
