@@ -22,12 +22,12 @@ def render_section() -> str:
     """Markdown for every world kind's and every program's parameters (between the markers)."""
     parts = ["#### Worlds (`sme world NAME --param K=V`, `sme world NAME --list-params`)", ""]
     for name in sorted(WORLDS):
-        kind = WORLDS[name]
-        parts += [f"`{name}`: {kind.summary}", "", table_markdown(kind.params_type()), ""]
+        world = WORLDS[name]
+        parts += [f"`{name}`: {world.summary}", "", table_markdown(world.params_type()), ""]
     parts += ["#### Programs (`sme agent --program-param PROGRAM.K=V`, `sme agent --list-params PROGRAM`)", ""]
     for name in sorted(PROGRAMS):
-        kind = PROGRAMS[name]
-        parts += [f"`{name}`: {kind.summary}", "", table_markdown(kind.params_type()), ""]
+        program = PROGRAMS[name]
+        parts += [f"`{name}`: {program.summary}", "", table_markdown(program.params_type()), ""]
     return "\n".join(parts).rstrip("\n")
 
 

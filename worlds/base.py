@@ -40,6 +40,9 @@ class World(abc.ABC):
     kind: str = "world"
     max_episode_steps: int = 1000
     Params: ClassVar[type] = NoParams
+    # the parsed instance of `Params`; Any because a subclass may declare other parameters than its
+    # base (MountainCarWorld extends VergenceWorld with its own MountainCarWorldParams)
+    params: Any
 
     def __init__(self, world_id: str = "w0", seed: int = 0) -> None:
         self.world_id = world_id

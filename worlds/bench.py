@@ -30,7 +30,7 @@ class BenchWorld(World):
         super().__init__(world_id, seed)
         self.params = prm = parse(BenchWorldParams, overrides, name=self.kind, base=params)
         obs_bytes, episode_steps = prm.obs_bytes, prm.episode_steps
-        self.frame = self.rng.random(obs_bytes // 4, dtype=np.float32)
+        self.obs = self.rng.random(obs_bytes // 4, dtype=np.float32)
         self.max_episode_steps = episode_steps
         self.t = 0
 
@@ -38,15 +38,15 @@ class BenchWorld(World):
         return WorldSpec(
             self.world_id,
             self.kind,
-            (SensorSpec("frame", "float32", self.frame.shape),),
+            (SensorSpec("frame", "float32", self.obs.shape),),
             ActionSpace(n=2),
             program="echo",
         )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
         self.t = 0
-        return StepResult({"frame": self.frame})
+        return StepResult({"frame": self.obs})
 
     def step(self, action: np.ndarray) -> StepResult:
         self.t += 1
-        return StepResult({"frame": self.frame}, float(action[0]), self.t >= self.max_episode_steps)
+        return StepResult({"frame": self.obs}, float(action[0]), self.t >= self.max_episode_steps)

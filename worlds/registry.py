@@ -8,10 +8,19 @@ from __future__ import annotations
 import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from sensorimotor.protocol.params import ParamError, parse, unknown_name
 from sensorimotor.worlds.base import World
+
+
+class WorldClass(Protocol):
+    """A World subclass seen as a constructor: every world kind takes `(world_id, seed, params)`
+    (the base `World.__init__` takes no parameters, so `type[World]` cannot be called this way)."""
+
+    Params: type
+
+    def __call__(self, world_id: str, seed: int = 0, params: Any = None, /) -> World: ...
 
 
 @dataclass(frozen=True)
@@ -23,10 +32,10 @@ class WorldKind:
     params: str
     summary: str
 
-    def world_class(self) -> type[World]:
+    def world_class(self) -> WorldClass:
         return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.cls)
 
-    def params_type(self) -> type:
+    def params_type(self) -> type[Any]:
         return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.params)
 
 
@@ -55,7 +64,7 @@ def world_kind(name: str) -> WorldKind:
         raise ParamError(unknown_name("world", name, sorted(WORLDS))) from None
 
 
-def world_params(name: str) -> type:
+def world_params(name: str) -> type[Any]:
     """The parameter dataclass of world kind `name`."""
     return world_kind(name).params_type()
 

@@ -16,7 +16,7 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pybullet as p
@@ -84,7 +84,7 @@ class VergenceWorldParams:
 
 class VergenceWorld(World):
     kind = "vergence"
-    Params = VergenceWorldParams
+    Params: ClassVar[type] = VergenceWorldParams
 
     def __init__(
         self, world_id: str = "vergence", seed: int = 0, params: VergenceWorldParams | None = None, **overrides: Any
