@@ -33,9 +33,11 @@ class WorldKind:
     summary: str
 
     def world_class(self) -> WorldClass:
+        """Import the world's module and return its World class."""
         return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.cls)
 
     def params_type(self) -> type[Any]:
+        """Import the world's module and return its parameter dataclass."""
         return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.params)
 
 
@@ -75,7 +77,34 @@ def parse_world_params(name: str, params: Mapping[str, Any] | None = None) -> An
 
 
 def make_world(name: str, world_id: str | None = None, seed: int = 0, params: Mapping[str, Any] | None = None) -> World:
-    """Build world kind `name`; `params` are validated against its declaration first."""
+    """Build a world by kind name; `params` are validated against its declaration first.
+
+    Parameters
+    ----------
+    name : str
+        A world kind of `WORLDS` (``gridworld``, ``retina``, ``vergence``...).
+    world_id : str or None, default=None
+        The world's id on the bus (default: `name`).
+    seed : int, default=0
+        Seeds the world's random generator.
+    params : mapping or None, default=None
+        Parameters as ``k=v`` strings or typed values (default: the kind's defaults).
+
+    Returns
+    -------
+    World
+
+    Raises
+    ------
+    ParamError
+        For an unknown kind (with a suggestion) or an invalid parameter.
+
+    Examples
+    --------
+    >>> w = make_world("gridworld", "grid0", seed=1, params={"size": "5"})
+    >>> w.spec().n_starts
+    25
+    """
     kind = world_kind(name)
     prm = parse(kind.params_type(), params or {}, name=name)
     return kind.world_class()(world_id or name, seed, prm)
