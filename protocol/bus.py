@@ -34,6 +34,20 @@ class BusError(RuntimeError):
 
 
 class BusMessage(NamedTuple):
+    """One sample as the bus hands it to callbacks and inboxes.
+
+    Attributes
+    ----------
+    key : str
+        The key expression it was published on.
+    payload : bytes
+        The raw payload (decode it with `codec.decode`).
+    encoding : str
+        Zenoh's encoding string, e.g. ``application/protobuf;sme.v1.Observation``.
+    kind : str
+        ``put``, or ``delete`` (a liveliness token vanished).
+    """
+
     key: str
     payload: bytes
     encoding: str
@@ -108,6 +122,7 @@ class BusConfig:
             raise BusError(str(e)) from None
 
     def zenoh_config(self) -> zenoh.Config:
+        """This configuration as a `zenoh.Config` (BusError for an unknown mode)."""
         if self.mode not in ("router", "peer", "client"):
             raise BusError(f"--mode must be router, peer or client, not {self.mode!r}")
         cfg = zenoh.Config.from_file(self.config_file) if self.config_file else zenoh.Config()
@@ -136,6 +151,7 @@ class BusConfig:
         return cfg
 
     def describe(self) -> str:
+        """One line for logs and --help, e.g. ``client connecting to tcp/127.0.0.1:7447``."""
         ends = ",".join(self.listen if self.mode == "router" else self.connect) or "-"
         wait = " (waits for it)" if self.retry and self.mode == "client" else ""
         sec = f", mutual TLS as {security.common_name(self.credential)}" if self.secure_dir else ""
@@ -147,7 +163,15 @@ class BusConfig:
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser, role: str) -> None:
-    """The zenoh example flags, with this role's embedded default explained in --help."""
+    """Add the zenoh example flags to `parser`, with this role's embedded default explained in --help.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The command's parser; the flags go in a ``zenoh`` argument group.
+    role : {"agent", "world", "tool"}
+        Whose defaults to show (see `BusConfig.for_role`).
+    """
     d = BusConfig.for_role(role)
     g = parser.add_argument_group(
         "zenoh", f"bus session (default for this command: {d.describe()}; no multicast, loopback only)"
@@ -253,6 +277,7 @@ class Inbox:
         self._closed = False
 
     def push(self, msg: BusMessage) -> None:
+        """Append `msg`, dropping (and counting in `dropped`) the oldest one when full."""
         with self._cv:
             if len(self._q) >= self.maxsize:
                 self._q.popleft()
@@ -268,6 +293,7 @@ class Inbox:
             return self._q.popleft() if self._q else None
 
     def close(self) -> None:
+        """Wake every waiting `get`; later gets return what is left, then None."""
         with self._cv:
             self._closed = True
             self._cv.notify_all()
@@ -285,11 +311,34 @@ class Publisher:
 
 
 class Bus:
-    """A Zenoh session with the few operations the project needs. Always use as a context manager:
-    a session with declared callbacks keeps the interpreter alive until it is closed."""
+    """A Zenoh session with the few operations the project needs.
+
+    Always use it as a context manager: a session with declared callbacks keeps the interpreter
+    alive until it is closed. Callbacks run on zenoh's threads; an exception in one is logged.
+
+    Parameters
+    ----------
+    config : BusConfig
+        How to open the session.
+    wait_limit : float or None, default=None
+        With ``config.retry``, give up waiting for the router after this many seconds
+        (None: wait until interrupted).
+
+    Raises
+    ------
+    BusError
+        If the session cannot be opened; the message hints at the fix.
+
+    Examples
+    --------
+    >>> from sensorimotor.protocol import codec, keys, messages
+    >>> from sensorimotor.protocol.bus import Bus, BusConfig
+    >>> with Bus(BusConfig.for_role("tool")) as bus:  # doctest: +SKIP
+    ...     (reply,) = bus.get(keys.world_spec("grid0"))
+    ...     spec = codec.decode(messages.WorldSpec, reply.payload)
+    """
 
     def __init__(self, config: BusConfig, wait_limit: float | None = None) -> None:
-        """`wait_limit`: with `config.retry`, give up waiting for the router after this many seconds."""
         self.config = config
         try:
             self._session = self._open(config, wait_limit)
@@ -335,6 +384,7 @@ class Bus:
         self.close()
 
     def close(self) -> None:
+        """Close the session (and everything declared on it); closing twice is harmless."""
         with self._lock:
             if self._closed:
                 return
@@ -346,18 +396,37 @@ class Bus:
 
     @property
     def closed(self) -> bool:
+        """Whether `close` was called."""
         return self._closed
 
     @staticmethod
     def encoding(schema: str | None) -> Any:
+        """The zenoh encoding of a protobuf message called `schema` (octet-stream for None)."""
         if schema is None:
             return zenoh.Encoding.APPLICATION_OCTET_STREAM
         return zenoh.Encoding.APPLICATION_PROTOBUF.with_schema(schema)
 
     # publish -----------------------------------------------------------------------------------
     def publisher(self, key: str, schema: str | None = None, *, express: bool = True, block: bool = True) -> Publisher:
-        """A declared publisher. `block=True` (reliable, congestion BLOCK) for lockstep traffic;
-        `block=False` drops under congestion (for best-effort live views)."""
+        """Declare a publisher on `key`.
+
+        Parameters
+        ----------
+        key : str
+            The key expression (see `keys`).
+        schema : str or None, default=None
+            The protobuf full name of the messages (`codec.schema_name`), carried in the encoding.
+        express : bool, default=True
+            Send at once instead of batching (lower latency).
+        block : bool, default=True
+            True (reliable, congestion BLOCK) for lockstep traffic; False drops under congestion
+            (for best-effort live views).
+
+        Returns
+        -------
+        Publisher
+            Its ``put(payload)`` sends one message.
+        """
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         pub = self._session.declare_publisher(
             key, express=express, congestion_control=cc, encoding=self.encoding(schema)
@@ -366,22 +435,77 @@ class Bus:
         return Publisher(pub)
 
     def put(self, key: str, payload: bytes, schema: str | None = None) -> None:
+        """Publish one message on `key` without declaring a publisher (for occasional messages).
+
+        Parameters
+        ----------
+        key : str
+            The key expression.
+        payload : bytes
+            The serialized message.
+        schema : str or None, default=None
+            The protobuf full name of the message, carried in the encoding.
+        """
         self._session.put(key, payload, encoding=self.encoding(schema), express=True)
 
     # subscribe ---------------------------------------------------------------------------------
     def subscribe(self, key: str, callback: Callable[[BusMessage], None]) -> Any:
+        """Call `callback` with every message published on `key`.
+
+        Parameters
+        ----------
+        key : str
+            A key expression (wildcards allowed, e.g. `keys.ALL_OBS`).
+        callback : callable
+            Called as ``callback(BusMessage)`` on a zenoh thread; an exception is logged.
+
+        Returns
+        -------
+        object
+            The zenoh subscriber (pass it to `undeclare` to stop).
+        """
         sub = self._session.declare_subscriber(key, _guard(callback, key))
         self._declared.append(sub)
         return sub
 
     def inbox(self, key: str, maxsize: int = 1024) -> Inbox:
+        """Subscribe to `key` into a bounded queue, for consumers that poll instead of reacting.
+
+        Parameters
+        ----------
+        key : str
+            A key expression (wildcards allowed).
+        maxsize : int, default=1024
+            Messages kept; beyond, the oldest are dropped and counted.
+
+        Returns
+        -------
+        Inbox
+        """
         box = Inbox(maxsize)
         self.subscribe(key, box.push)
         return box
 
     # query -------------------------------------------------------------------------------------
     def queryable(self, key: str, handler: Callable[[str, bytes | None], bytes], schema: str | None = None) -> Any:
-        """Answer `get`s on `key` with `handler(key, payload)`; an exception becomes an error reply."""
+        """Answer `get`s on `key` with `handler(key, payload)`.
+
+        Parameters
+        ----------
+        key : str
+            The key expression to answer on.
+        handler : callable
+            ``handler(key, payload) -> bytes``, where `payload` is the query's payload or None.
+            An exception becomes an error reply (a LookupError is logged at debug level only:
+            "nothing to answer" is expected).
+        schema : str or None, default=None
+            The protobuf full name of the replies.
+
+        Returns
+        -------
+        object
+            The zenoh queryable (pass it to `undeclare` to stop).
+        """
         enc = self.encoding(schema)
 
         def on_query(query: Any) -> None:
@@ -401,23 +525,72 @@ class Bus:
         return q
 
     def get(self, key: str, timeout: float = 2.0, payload: bytes | None = None) -> list[BusMessage]:
-        """Replies to a query (errors raise BusError)."""
+        """Query `key` and collect the replies.
+
+        Parameters
+        ----------
+        key : str
+            The key expression (wildcards gather one reply per matching queryable).
+        timeout : float, default=2.0
+            Seconds to wait for replies.
+        payload : bytes or None, default=None
+            Sent with the query.
+
+        Returns
+        -------
+        list of BusMessage
+            The replies (empty when nobody answered in time).
+
+        Raises
+        ------
+        BusError
+            If a queryable answered with an error; the message carries its text.
+        """
         out = []
         for reply in self._session.get(key, timeout=timeout, payload=payload):
             if reply.ok is not None:
                 out.append(_message(reply.ok))
             else:
-                raise BusError(f"query {key}: {reply.err.payload.to_bytes().decode(errors='replace')}")
+                err = reply.err
+                detail = err.payload.to_bytes().decode(errors="replace") if err is not None else "empty reply"
+                raise BusError(f"query {key}: {detail}")
         return out
 
     # liveliness --------------------------------------------------------------------------------
     def token(self, key: str) -> Any:
+        """Declare a liveliness token on `key` (it vanishes when undeclared or the process dies).
+
+        Parameters
+        ----------
+        key : str
+            The token's key (`keys.alive_world`, `keys.alive_agent`).
+
+        Returns
+        -------
+        object
+            The zenoh token (pass it to `undeclare` to withdraw it).
+        """
         tok = self._session.liveliness().declare_token(key)
         self._declared.append(tok)
         return tok
 
     def watch_alive(self, key: str, on_change: Callable[[str, bool], None], history: bool = True) -> Any:
-        """Call `on_change(key, alive)` when a liveliness token matching `key` appears or vanishes."""
+        """Call `on_change(key, alive)` when a liveliness token matching `key` appears or vanishes.
+
+        Parameters
+        ----------
+        key : str
+            A key expression (wildcards allowed, e.g. `keys.ALL_ALIVE_WORLDS`).
+        on_change : callable
+            ``on_change(token_key, alive)`` on a zenoh thread.
+        history : bool, default=True
+            Also report the tokens alive already.
+
+        Returns
+        -------
+        object
+            The zenoh subscriber (pass it to `undeclare` to stop).
+        """
 
         def cb(msg: BusMessage) -> None:
             on_change(msg.key, msg.kind == "put")
@@ -427,9 +600,23 @@ class Bus:
         return sub
 
     def alive(self, key: str, timeout: float = 1.0) -> list[str]:
+        """The keys of the liveliness tokens matching `key` alive now.
+
+        Parameters
+        ----------
+        key : str
+            A key expression (wildcards allowed).
+        timeout : float, default=1.0
+            Seconds to wait for the answer.
+
+        Returns
+        -------
+        list of str
+        """
         return [str(r.ok.key_expr) for r in self._session.liveliness().get(key, timeout=timeout) if r.ok is not None]
 
     def undeclare(self, entity: Any) -> None:
+        """Undeclare a publisher, subscriber, queryable or token made by this bus (no error if gone)."""
         try:
             entity.undeclare()
         except Exception:  # pragma: no cover - already gone with a closed session

@@ -266,7 +266,7 @@ def _dec_spec(p: pb.WorldSpec) -> m.WorldSpec:
     # Sensor and reward bounds may be infinite (an unbounded sensor, Gymnasium's default reward range).
     if len(p.sensors) > MAX_TENSORS:
         raise errors.OversizeMessage(f"WorldSpec: {len(p.sensors)} sensors, at most {MAX_TENSORS}")
-    sensors = []
+    sensors: list[m.SensorSpec] = []
     for s in p.sensors:
         dt = DTYPES.get(s.dtype)
         if dt is None:
@@ -416,7 +416,36 @@ _CODECS: dict[type, tuple[type, Callable[[Any], Any], Callable[[Any], Any]]] = {
 
 
 def encode(msg: Any) -> bytes:
-    """Serialise one of the message dataclasses (validated like a decode would be)."""
+    """Serialise one of the message dataclasses to Protocol Buffers bytes.
+
+    The message is validated like a decode would be (dtypes, shapes, sizes, finite numbers), so
+    a bad message fails at the sender, with the sender's stack trace.
+
+    Parameters
+    ----------
+    msg : WorldSpec, Observation, Action, Control, Truth, Embedding, AgentEvent, WorldEvent or AgentStatus
+        The message (an instance of one of the `messages` dataclasses).
+
+    Returns
+    -------
+    bytes
+        The serialized ``sme.v1`` message.
+
+    Raises
+    ------
+    TypeError
+        If `msg` is not a protocol message.
+    ProtocolError
+        If the message breaks the contract (`BadDtype`, `ShapeMismatch`, `OversizeMessage`,
+        `NonFiniteValue`, ...).
+
+    Examples
+    --------
+    >>> from sensorimotor.protocol import codec, messages
+    >>> data = codec.encode(messages.Action("grid0", step=3, values=(1.0,)))
+    >>> codec.decode(messages.Action, data).step
+    3
+    """
     try:
         _, enc, _ = _CODECS[type(msg)]
     except KeyError:
@@ -428,7 +457,31 @@ def encode(msg: Any) -> bytes:
 
 
 def decode(cls: type, payload: bytes | bytearray | memoryview) -> Any:
-    """Parse and validate bytes as message class `cls` (one of the `messages` dataclasses)."""
+    """Parse and validate bytes as message class `cls`.
+
+    Every check (total size, schema version, tensor count, dtype, shape against bytes, finite
+    numbers) runs before anything large is allocated, so hostile bytes cannot exhaust memory.
+
+    Parameters
+    ----------
+    cls : type
+        The expected message class (one of the `messages` dataclasses).
+    payload : bytes, bytearray or memoryview
+        The serialized message, as received.
+
+    Returns
+    -------
+    object
+        An instance of `cls`.
+
+    Raises
+    ------
+    KeyError
+        If `cls` is not a protocol message class.
+    ProtocolError
+        If the bytes are not a valid `cls` message (`MalformedMessage`, `UnknownVersion`,
+        `OversizeMessage`, `BadDtype`, `ShapeMismatch`, `NonFiniteValue`).
+    """
     pbcls, _, dec = _CODECS[cls]
     name = cls.__name__
     if len(payload) > MAX_MESSAGE_BYTES:
@@ -447,6 +500,8 @@ def decode(cls: type, payload: bytes | bytearray | memoryview) -> Any:
 
 
 def schema_name(cls: type) -> str:
+    """The protobuf full name of message class `cls` (e.g. ``sme.v1.Observation``), as bus
+    encodings and MCAP schemas carry it."""
     return SCHEMA_NAMES[cls]
 
 

@@ -10,26 +10,38 @@ class ProtocolError(ValueError):
 
 
 class MalformedMessage(ProtocolError):
+    """The bytes are not a protobuf message of the expected type (or a tensor name repeats)."""
+
     kind = "malformed"
 
 
 class UnknownVersion(ProtocolError):
+    """The message's schema version is not the one this build speaks."""
+
     kind = "unknown_version"
 
 
 class BadDtype(ProtocolError):
+    """A tensor's dtype is not on the whitelist (`codec.DTYPES`)."""
+
     kind = "bad_dtype"
 
 
 class ShapeMismatch(ProtocolError):
+    """A tensor's shape disagrees with its bytes, or has too many dimensions."""
+
     kind = "shape_mismatch"
 
 
 class OversizeMessage(ProtocolError):
+    """A message, a tensor, or a tensor's claimed shape is over the size limits."""
+
     kind = "oversize"
 
 
 class NonFiniteValue(ProtocolError):
+    """NaN or inf in a reward, an action value or a float tensor."""
+
     kind = "non_finite"
 
 

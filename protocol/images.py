@@ -12,7 +12,27 @@ SCHEMA = "foxglove.RawImage"
 
 
 def encode_image(frame: np.ndarray, frame_id: str, timestamp: float) -> bytes:
-    """uint8 [H, W] (mono8) or [H, W, 3] (rgb8) -> serialized foxglove.RawImage."""
+    """Serialize a camera frame as a foxglove.RawImage.
+
+    Parameters
+    ----------
+    frame : ndarray
+        uint8 ``[H, W]`` (mono8) or ``[H, W, 3]`` (rgb8).
+    frame_id : str
+        The image's frame id (the world id).
+    timestamp : float
+        Seconds since the epoch.
+
+    Returns
+    -------
+    bytes
+        The serialized message.
+
+    Raises
+    ------
+    ValueError
+        If `frame` is not one of the two layouts.
+    """
     a = np.ascontiguousarray(frame)
     if a.dtype != np.uint8 or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3):
         raise ValueError(f"frames are uint8 [H, W] or [H, W, 3], got {a.dtype}{list(a.shape)}")

@@ -1,4 +1,16 @@
-"""Every Zenoh key expression of the project, in one place (see DESIGN.md, "The loop")."""
+"""Every Zenoh key expression of the project, in one place (see DESIGN.md, "The loop").
+
+Keys are built from ids checked by `check_id`, so that an id can never widen a subscription
+(`*`, `**`) or add a level to a key.
+
+Examples
+--------
+>>> from sensorimotor.protocol import keys
+>>> keys.world_obs("grid0")
+'sme/v1/world/grid0/obs'
+>>> keys.world_of("sme/v1/agent/a0/embedding/grid0")
+'grid0'
+"""
 
 from __future__ import annotations
 
@@ -20,52 +32,200 @@ def check_id(value: str, what: str = "id") -> str:
 
 
 def world_obs(world: str) -> str:
+    """Key of a world's observations (Observation messages, one per step).
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/world/{world}/obs"
 
 
 def world_act(world: str) -> str:
+    """Key of the actions that answer a world's observations (Action messages).
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/world/{world}/act"
 
 
 def world_ctl(world: str) -> str:
+    """Key of a world's perturbations (Control messages, applied between steps).
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/world/{world}/ctl"
 
 
 def world_truth(world: str) -> str:
+    """Queryable key of a world's ground truth (Truth; for evaluation only).
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/world/{world}/truth"
 
 
 def world_spec(world: str) -> str:
+    """Queryable key of a world's spec (WorldSpec: sensors, action space, program).
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/world/{world}/spec"
 
 
 def world_event(world: str) -> str:
-    """WorldEvent messages: what the world reports about itself (e.g. a refused action)."""
+    """Key of WorldEvent messages: what the world reports about itself (e.g. a refused action).
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/world/{world}/event"
 
 
 def world_image(world: str, camera: str) -> str:
-    """Camera frames as foxglove.RawImage, for standard viewers."""
+    """Key of a world's camera frames as foxglove.RawImage, for standard viewers.
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+    camera : str
+        The camera's name (e.g. ``camera``).
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/world/{world}/image/{camera}"
 
 
 def alive_world(world: str) -> str:
+    """Liveliness-token key of a serving world.
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/alive/world/{world}"
 
 
 def alive_agent(agent: str) -> str:
+    """Liveliness-token key of a running agent daemon.
+
+    Parameters
+    ----------
+    agent : str
+        The agent id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/alive/agent/{agent}"
 
 
 def agent_embedding(agent: str, world: str) -> str:
+    """Key of the Embedding messages agent `agent` learns from world `world`.
+
+    Parameters
+    ----------
+    agent : str
+        The agent id.
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/agent/{agent}/embedding/{world}"
 
 
 def agent_event(agent: str, world: str) -> str:
+    """Key of the AgentEvent messages (drops, pauses, ...) of agent `agent` about world `world`.
+
+    Parameters
+    ----------
+    agent : str
+        The agent id.
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/agent/{agent}/event/{world}"
 
 
 def agent_status(agent: str) -> str:
+    """Key of an agent daemon's AgentStatus messages.
+
+    Parameters
+    ----------
+    agent : str
+        The agent id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
     return f"{PREFIX}/agent/{agent}/status"
 
 
@@ -78,11 +238,34 @@ ALL_WORLD_EVENTS = f"{PREFIX}/world/*/event"
 
 
 def last_chunk(key: str) -> str:
+    """The last ``/``-separated chunk of `key`.
+
+    Parameters
+    ----------
+    key : str
+        A key expression (anything `str()` accepts, e.g. a zenoh KeyExpr).
+
+    Returns
+    -------
+    str
+        The chunk after the last ``/`` (all of `key` when it has none).
+    """
     return str(key).rsplit("/", 1)[-1]
 
 
 def world_of(key: str) -> str:
-    """The world id in a key under sme/v1/world/{id}/... or .../embedding|event/{id}."""
+    """The world id in a key under ``sme/v1/world/{id}/...`` or ``.../embedding|event/{id}``.
+
+    Parameters
+    ----------
+    key : str
+        A key expression (anything `str()` accepts, e.g. a zenoh KeyExpr).
+
+    Returns
+    -------
+    str
+        The world id: the chunk after ``world/`` for world keys, else the last chunk.
+    """
     parts = str(key).split("/")
     if len(parts) >= 4 and parts[2] == "world":
         return parts[3]

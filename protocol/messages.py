@@ -47,6 +47,22 @@ class WorldEventKind(StrEnum):
 
 @dataclass(frozen=True)
 class SensorSpec:
+    """One sensor a world publishes: every Observation carries a tensor of exactly this dtype and shape.
+
+    Attributes
+    ----------
+    name : str
+        The tensor's name in `Observation.tensors`.
+    dtype : str
+        A numpy dtype name (``uint8``, ``float32``, ...; see `codec.DTYPES`).
+    shape : tuple of int
+        The tensor's shape.
+    low, high : float
+        The range of the values (documentation for programs and viewers).
+    description : str
+        What the sensor measures, for people.
+    """
+
     name: str
     dtype: str
     shape: tuple[int, ...]
@@ -57,7 +73,17 @@ class SensorSpec:
 
 @dataclass(frozen=True)
 class ActionSpace:
-    """Discrete (n > 0) or box (low/high per dimension)."""
+    """The actions a world accepts: discrete (``n > 0``) or a box (`low`/`high` per dimension).
+
+    Attributes
+    ----------
+    n : int
+        The number of discrete actions (0 for a box).
+    low, high : tuple of float
+        Per-dimension bounds of a box.
+    names : tuple of str
+        Optional names of the discrete actions or box dimensions.
+    """
 
     n: int = 0
     low: tuple[float, ...] = ()
@@ -66,15 +92,41 @@ class ActionSpace:
 
     @property
     def discrete(self) -> bool:
+        """Whether actions are indices (``values[0]`` in ``0..n-1``)."""
         return self.n > 0
 
     @property
     def dims(self) -> int:
+        """The number of values an Action carries (1 for a discrete space)."""
         return 1 if self.discrete else len(self.low)
 
 
 @dataclass(frozen=True)
 class WorldSpec:
+    """What a world is, answered on its spec queryable: what the agent needs before the first step.
+
+    Attributes
+    ----------
+    world_id : str
+        The world's id (a key chunk, see `keys.check_id`).
+    kind : str
+        The world kind (``gridworld``, ``retina``, ...).
+    sensors : tuple of SensorSpec
+        Every tensor an Observation carries.
+    action_space : ActionSpace
+        The actions the world accepts.
+    reward_min, reward_max : float
+        The reward range.
+    program : str
+        The developmental program the agent should run on this world.
+    n_starts : int
+        The number of start states the world can reset to.
+    params : dict of str to str
+        The world's parameters as exact ``k=v`` strings.
+    session : str
+        A random string per world process start (a new one means the world restarted).
+    """
+
     world_id: str
     kind: str
     sensors: tuple[SensorSpec, ...]
@@ -87,6 +139,7 @@ class WorldSpec:
     session: str = ""
 
     def sensor(self, name: str) -> SensorSpec:
+        """The sensor called `name` (KeyError naming the world if there is none)."""
         for s in self.sensors:
             if s.name == name:
                 return s
@@ -95,6 +148,32 @@ class WorldSpec:
 
 @dataclass(frozen=True)
 class Observation:
+    """What a world publishes at each lockstep step; the agent answers it with an Action.
+
+    Attributes
+    ----------
+    world_id : str
+        The world's id.
+    episode : int
+        The episode counter.
+    step : int
+        The per-world step counter, strictly increasing; the answering Action carries it.
+    t : int
+        The step within the episode (0 after a reset).
+    tensors : dict of str to ndarray
+        One tensor per sensor of the spec.
+    reward : float
+        The reward received on entering this state (0 at ``t = 0``).
+    done : bool
+        Whether the episode ended here (the answer resets the world).
+    start : int
+        The start state of this episode (-1 if random).
+    timestamp : float
+        Seconds since the epoch.
+    session : str
+        The world process's session (see `WorldSpec.session`).
+    """
+
     world_id: str
     episode: int
     step: int
@@ -109,6 +188,24 @@ class Observation:
 
 @dataclass(frozen=True)
 class Action:
+    """The agent's answer to the observation of step `step`.
+
+    Attributes
+    ----------
+    world_id : str
+        The world's id.
+    step : int
+        The step of the observation this answers.
+    values : tuple of float
+        Discrete: ``values[0]`` is the action index; box: one value per dimension.
+    reset : bool
+        Start a new episode instead of stepping.
+    start : int
+        The start state of that episode (-1 for a random one).
+    timestamp : float
+        Seconds since the epoch.
+    """
+
     world_id: str
     step: int
     values: tuple[float, ...] = ()
@@ -119,6 +216,22 @@ class Action:
 
 @dataclass(frozen=True)
 class Control:
+    """A perturbation of a world (a body change, a lesion...), applied between steps.
+
+    Attributes
+    ----------
+    world_id : str
+        The world's id.
+    kind : str
+        The perturbation, as the world names it (see each world's `perturb`).
+    params : dict of str to str
+        The perturbation's parameters as strings.
+    id : int
+        An id the sender chooses, to match the world's report.
+    timestamp : float
+        Seconds since the epoch.
+    """
+
     world_id: str
     kind: str
     params: dict[str, str] = field(default_factory=dict)
@@ -128,6 +241,23 @@ class Control:
 
 @dataclass(frozen=True)
 class Truth:
+    """A world's ground truth, used to score embeddings and never to learn.
+
+    Attributes
+    ----------
+    world_id : str
+        The world's id.
+    kind : str
+        The world kind.
+    tensors : dict of str to ndarray
+        ``positions``: float64 ``[n, d]``, row *i* the true coordinates of start state or point *i*;
+        worlds may add others.
+    step : int
+        The step at which the truth was taken.
+    timestamp : float
+        Seconds since the epoch.
+    """
+
     world_id: str
     kind: str
     tensors: dict[str, np.ndarray]
@@ -137,6 +267,36 @@ class Truth:
 
 @dataclass(frozen=True)
 class Embedding:
+    """One version of what an agent learned about a world: coordinates of its states.
+
+    Attributes
+    ----------
+    agent_id, world_id : str
+        Who learned it, from which world.
+    version : int
+        Increases with every embedding of the link.
+    trigger : str
+        Why this version was made (a `Trigger` token; readers accept unknown tokens).
+    ids : tuple of int
+        The state (start) ids, one per row of `coordinates`.
+    coordinates : ndarray
+        ``[len(ids), d]`` embedded coordinates.
+    eigenvalues : tuple of float
+        The eigenvalues of the embedding's dimensions.
+    procrustes_error : float or None
+        The error against the world's truth after Procrustes alignment (None without truth).
+    step : int
+        The world step at which it was made.
+    timestamp : float
+        Seconds since the epoch.
+    metrics : dict of str to float
+        Program-specific scores (e.g. ``policy_success``).
+    iteration : int
+        The number of policy iterations the traces come from (trigger ``policy_iteration``).
+    drop_step : int or None
+        The step at which a reward drop was detected (trigger ``relearned``).
+    """
+
     agent_id: str
     world_id: str
     version: int
@@ -164,6 +324,28 @@ class AttachConfig:
 
 @dataclass(frozen=True)
 class AgentEvent:
+    """Something an agent reports about a link (attached, paused, drop detected...).
+
+    Attributes
+    ----------
+    agent_id, world_id : str
+        The agent and the world the link joins.
+    kind : str
+        An `EventKind` token.
+    detail : str
+        For people; never parsed.
+    step : int
+        The world step it refers to.
+    timestamp : float
+        Seconds since the epoch.
+    values : dict of str to float
+        Numbers that go with the event (e.g. ``reward`` and ``reference`` of a drop).
+    reason : str
+        A machine-readable sub-kind (see protocol/README.md).
+    config : AttachConfig or None
+        How the link was attached (kind ``attached`` only).
+    """
+
     agent_id: str
     world_id: str
     kind: str
@@ -190,6 +372,30 @@ class WorldEvent:
 
 @dataclass(frozen=True)
 class LinkStatus:
+    """The state of one agent-world link, as `sme status` shows it.
+
+    Attributes
+    ----------
+    world_id, kind, program : str
+        The world, its kind and the program running on it.
+    state : str
+        ``attached`` or ``paused``.
+    steps, episodes : int
+        Counted since the link was made.
+    embedding_version : int
+        The latest Embedding version.
+    reward_mean : float
+        The recent mean reward.
+    rejected : dict of str to int
+        Refused observations by error kind.
+    last_procrustes_error : float
+        The latest embedding's error (NaN when unknown).
+    detector_statistic : float
+        The drop detector's current statistic.
+    drops : int
+        Detected reward drops.
+    """
+
     world_id: str
     kind: str
     program: str
@@ -207,6 +413,22 @@ class LinkStatus:
 
 @dataclass(frozen=True)
 class AgentStatus:
+    """An agent daemon's status, answered on its status queryable.
+
+    Attributes
+    ----------
+    agent_id : str
+        The agent's id.
+    uptime : float
+        Seconds since the daemon started.
+    links : tuple of LinkStatus
+        One per attached world.
+    counters : dict of str to int
+        Daemon-wide counters (``unattached``, ``attach_failed``, ...).
+    timestamp : float
+        Seconds since the epoch.
+    """
+
     agent_id: str
     uptime: float
     links: tuple[LinkStatus, ...] = ()

@@ -25,9 +25,12 @@ import math
 import types
 import typing
 from collections.abc import Iterable, Mapping
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from rapidfuzz import fuzz, process
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 __all__ = [
     "ParamError",
@@ -44,7 +47,7 @@ __all__ = [
     "unknown_name",
 ]
 
-P = TypeVar("P")
+P = TypeVar("P", bound="DataclassInstance")
 
 _TRUE = ("true", "1", "yes", "on")
 _FALSE = ("false", "0", "no", "off")
@@ -67,6 +70,31 @@ def option(
 
     Equivalent to ``field(default=default, metadata={"doc": doc, "min": min, ...})``; either form is
     read by `parse` and the table renderers.
+
+    Parameters
+    ----------
+    default : object
+        The default value (immutable: the dataclasses are frozen and shared).
+    doc : str
+        One line for `--list-params` and the README.
+    min, max : float or None, default=None
+        Inclusive bounds, checked by `parse`.
+    choices : iterable or None, default=None
+        The only values accepted.
+
+    Returns
+    -------
+    dataclasses.Field
+        Typed as Any so that it can be assigned to an annotated field.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass
+    >>> @dataclass(frozen=True)
+    ... class P:
+    ...     size: int = option(5, "side of the grid", min=2)
+    >>> parse(P, ["size=7"]).size
+    7
     """
     meta: dict[str, Any] = {"doc": doc}
     if min is not None:
@@ -80,7 +108,15 @@ def option(
 
 @dataclasses.dataclass(frozen=True)
 class ParamInfo:
-    """One declared parameter, as shown by `--list-params` and the README."""
+    """One declared parameter, as shown by `--list-params` and the README.
+
+    Attributes
+    ----------
+    name, type, default : str
+        The field's name, its type and its default, as written on the command line.
+    doc : str
+        The field's doc, with its range or choices.
+    """
 
     name: str
     type: str
@@ -260,9 +296,35 @@ def unknown_name(what: str, key: str, valid: Iterable[str]) -> str:
 def cast_values(cls: type, values: Mapping[str, Any] | Iterable[str] | None, name: str | None = None) -> dict[str, Any]:
     """Validate and cast only the given values: `{key: typed value}`.
 
-    `values` is a mapping of strings or typed values, or an iterable of `k=v` strings. All problems
-    are collected into one ParamError, so a command line is fixed in one go. Useful where the
-    overrides themselves are kept (a daemon's JSON config) rather than a full instance.
+    All problems are collected into one ParamError, so a command line is fixed in one go. Useful
+    where the overrides themselves are kept (a daemon's JSON config) rather than a full instance.
+
+    Parameters
+    ----------
+    cls : type
+        The parameter dataclass that declares the fields.
+    values : mapping, iterable of str, or None
+        A mapping of strings or typed values, or an iterable of ``k=v`` strings.
+    name : str or None, default=None
+        Who owns the parameters, for messages (default: the class name).
+
+    Returns
+    -------
+    dict of str to object
+        The given keys only, with values of the declared types.
+
+    Raises
+    ------
+    ParamError
+        Naming every unknown key (with a suggestion), unparsable value and value out of range.
+    TypeError
+        If `cls` is not a dataclass.
+
+    Examples
+    --------
+    >>> from sensorimotor.worlds.gridworld import GridWorldParams
+    >>> cast_values(GridWorldParams, ["size=7"])
+    {'size': 7}
     """
     owner = name or cls.__name__
     hints = _hints(cls)
@@ -300,8 +362,41 @@ def parse(
     name: str | None = None,
     base: P | None = None,
 ) -> P:
-    """An instance of the parameter dataclass `cls`: `base` (default: all defaults) with `values`
-    cast, checked and applied. Raises ParamError with a message naming `name` (default: the class)."""
+    """An instance of the parameter dataclass `cls`: `base` with `values` cast, checked and applied.
+
+    Parameters
+    ----------
+    cls : type
+        The parameter dataclass (frozen, fields declared with `option`).
+    values : mapping, iterable of str, or None, default=None
+        Overrides: a mapping of strings or typed values, or an iterable of ``k=v`` strings.
+    name : str or None, default=None
+        Who owns the parameters, for messages (default: the class name).
+    base : instance of `cls` or None, default=None
+        The values to start from (default: all defaults).
+
+    Returns
+    -------
+    instance of `cls`
+
+    Raises
+    ------
+    ParamError
+        With a message naming `name`, for every unknown, unparsable or out-of-range value.
+    TypeError
+        If `base` is not an instance of `cls`.
+
+    Examples
+    --------
+    >>> from sensorimotor.worlds.gridworld import GridWorldParams
+    >>> p = parse(GridWorldParams, {"size": "7"}, name="gridworld")
+    >>> p.size
+    7
+    >>> parse(GridWorldParams, ["sise=7"], name="gridworld")  # doctest: +IGNORE_EXCEPTION_DETAIL
+    Traceback (most recent call last):
+    ...
+    ParamError: gridworld: unknown parameter 'sise' (did you mean 'size'?); valid: size, barrier, actions, goal, max_episode_steps
+    """
     typed = cast_values(cls, values, name)
     if base is None:
         return cls(**typed)

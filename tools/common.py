@@ -105,6 +105,7 @@ def parse_params(items: list[str] | None) -> dict[str, str]:
 
 
 def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (for tests and benchmarks that start their own agent)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -115,6 +116,19 @@ def _num(x: float | None) -> float | None:
 
 
 def embedding_dict(e: Embedding, coordinates: bool = False) -> dict[str, Any]:
+    """An Embedding as a JSON-ready dict (NaN becomes None), as `sme watch --json` prints it.
+
+    Parameters
+    ----------
+    e : Embedding
+        The message.
+    coordinates : bool, default=False
+        Include the ids and coordinates (large).
+
+    Returns
+    -------
+    dict
+    """
     d = {
         "type": "embedding",
         "agent": e.agent_id,
@@ -138,6 +152,7 @@ def embedding_dict(e: Embedding, coordinates: bool = False) -> dict[str, Any]:
 
 
 def event_dict(e: AgentEvent) -> dict[str, Any]:
+    """An AgentEvent as a JSON-ready dict (with its AttachConfig, if any)."""
     d = {
         "type": "event",
         "agent": e.agent_id,
@@ -167,6 +182,7 @@ def describe_trigger(e: Embedding) -> str:
 
 
 def status_dict(s: AgentStatus) -> dict[str, Any]:
+    """An AgentStatus as a JSON-ready dict, one entry per link."""
     return {
         "agent": s.agent_id,
         "uptime": round(s.uptime, 3),
@@ -193,6 +209,7 @@ def status_dict(s: AgentStatus) -> dict[str, Any]:
 
 
 def format_embedding(e: Embedding) -> str:
+    """An Embedding as one line for people."""
     err = "n/a" if e.procrustes_error is None else f"{e.procrustes_error:.4f}"
     eig = " ".join(f"{v:.3g}" for v in e.eigenvalues[:4])
     return (
@@ -202,8 +219,10 @@ def format_embedding(e: Embedding) -> str:
 
 
 def format_event(e: AgentEvent) -> str:
+    """An AgentEvent as one line for people."""
     return f"[{e.world_id}] event {e.kind}: {e.detail}"
 
 
 def print_json(d: dict[str, Any]) -> None:
+    """Print `d` as one JSON line and flush (line-oriented consumers read it at once)."""
     print(json.dumps(d), flush=True)

@@ -19,6 +19,18 @@ from sensorimotor.worlds.lockstep import Lockstep
 
 @dataclass
 class InProcessRun:
+    """What `run_inprocess` did: steps, episodes, seconds, and every message the agent published.
+
+    Attributes
+    ----------
+    steps, episodes : int
+        Answered steps and episodes begun.
+    seconds : float
+        Wall time of the loop.
+    outputs : list
+        Embedding, AgentEvent and WorldEvent messages, in order.
+    """
+
     steps: int = 0
     episodes: int = 0
     seconds: float = 0.0
@@ -26,13 +38,16 @@ class InProcessRun:
 
     @property
     def embeddings(self) -> list[Embedding]:
+        """The Embedding messages, in order."""
         return [o for o in self.outputs if isinstance(o, Embedding)]
 
     @property
     def errors(self) -> list[float | None]:
+        """The Procrustes error of each embedding (None where the world gave no truth)."""
         return [e.procrustes_error for e in self.embeddings]
 
     def events(self, kind: str | None = None) -> list[AgentEvent]:
+        """The AgentEvents, all or those of `kind`."""
         return [o for o in self.outputs if isinstance(o, AgentEvent) and (kind is None or o.kind == kind)]
 
 
@@ -47,12 +62,43 @@ def run_inprocess(
     on_step: Callable[[int, Observation], None] | None = None,
 ) -> InProcessRun:
     """Run `program` on `world` for `steps` steps through the same attach path and lockstep driver
-    as the daemon and the world node.
+    as the daemon and the world node, without a bus.
 
-    `perturb(k)` may return a Control, applied to the world after step k is answered (as a live
-    perturbation arrives between steps); `on_step(k, obs)` sees every observation. WorldEvents
-    (e.g. a refused action) land in `outputs` too. The run ends early when the link pauses (a
-    program that keeps failing)."""
+    The run ends early when the link pauses (a program that keeps failing) or `stop_when` says so.
+
+    Parameters
+    ----------
+    world : World
+        The simulator (not closed here).
+    program : Program
+        The developmental program, built for ``world.spec()``.
+    steps : int
+        The most steps to run.
+    detector : DropDetector or None, default=None
+        The reward-drop detector (None: no drop detection).
+    on_output : callable or None, default=None
+        ``on_output(msg)`` for every Embedding, AgentEvent and WorldEvent, as it is published.
+    stop_when : callable or None, default=None
+        ``stop_when(run)`` after every step; True ends the run.
+    perturb : callable or None, default=None
+        ``perturb(k)`` may return a Control, applied to the world after step k is answered (as a
+        live perturbation arrives between steps).
+    on_step : callable or None, default=None
+        ``on_step(k, obs)`` sees every observation before the program does.
+
+    Returns
+    -------
+    InProcessRun
+        The counts and every message published (WorldEvents, e.g. a refused action, included).
+
+    Examples
+    --------
+    >>> from sensorimotor.agent.programs.gridworld import GridworldProgram
+    >>> from sensorimotor.worlds.gridworld import GridWorld
+    >>> w = GridWorld(seed=0)
+    >>> run = run_inprocess(w, GridworldProgram(w.spec(), seed=0), 2000)  # doctest: +SKIP
+    >>> run.errors[-1]  # doctest: +SKIP
+    """
     run = InProcessRun()
     answers: list[Any] = []
 

@@ -29,6 +29,22 @@ COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none"
 
 @dataclass(frozen=True)
 class Record:
+    """One message of a recording.
+
+    Attributes
+    ----------
+    topic : str
+        The zenoh key it was published on.
+    schema : str
+        Its protobuf full name, or "" for raw payloads.
+    log_time : int
+        When the recorder received it, in ns since the epoch.
+    data : bytes
+        The payload.
+    sequence : int
+        The writer's sequence number.
+    """
+
     topic: str  # the zenoh key
     schema: str  # protobuf full name, or "" for raw payloads
     log_time: int  # ns since the epoch
@@ -65,6 +81,7 @@ class McapSink:
         return sid
 
     def write(self, rec: Record) -> None:
+        """Append one message, registering its channel and schema on first use."""
         key = (rec.topic, rec.schema)
         cid = self._channels.get(key)
         if cid is None:
@@ -79,6 +96,7 @@ class McapSink:
         self._w.flush()
 
     def finish(self) -> None:
+        """Write the summary and footer: the file is complete (the stream stays open)."""
         self._w.finish()
 
 

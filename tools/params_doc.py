@@ -37,8 +37,8 @@ def render_section() -> str:
             parts += [f"`{name}` `{ctl}`: {doc}", "", table_markdown(cls), ""]
     parts += ["#### Programs (`sme agent --program-param PROGRAM.K=V`, `sme agent --list-params PROGRAM`)", ""]
     for name in sorted(PROGRAMS):
-        kind = PROGRAMS[name]
-        parts += [f"`{name}`: {kind.summary}", "", table_markdown(kind.params_type()), ""]
+        program = PROGRAMS[name]
+        parts += [f"`{name}`: {program.summary}", "", table_markdown(program.params_type()), ""]
     return "\n".join(parts).rstrip("\n")
 
 

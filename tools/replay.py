@@ -242,7 +242,14 @@ class Replayer:
 
     def _declare_world(self, wid: str) -> None:
         self._answered[wid] = threading.Event()
-        self.bus.queryable(keys.world_spec(wid), lambda k, p, w=wid: self._specs[w], codec.schema_name(WorldSpec))
+
+        def spec(k: str, p: bytes | None, w: str = wid) -> bytes:
+            return self._specs[w]
+
+        def on_action(m: Any, w: str = wid) -> None:
+            self._on_action(w, m)
+
+        self.bus.queryable(keys.world_spec(wid), spec, codec.schema_name(WorldSpec))
 
         def truth(k: str, p: bytes | None, w: str = wid) -> bytes:
             if w not in self._truths:
@@ -250,7 +257,7 @@ class Replayer:
             return self._truths[w]
 
         self.bus.queryable(keys.world_truth(wid), truth, codec.schema_name(Truth))
-        self.bus.subscribe(keys.world_act(wid), lambda m, w=wid: self._on_action(w, m))
+        self.bus.subscribe(keys.world_act(wid), on_action)
         self.bus.token(keys.alive_world(wid))
 
     def run(self, loop_index: int = 0) -> int:

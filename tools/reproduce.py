@@ -18,7 +18,7 @@ import os
 import sys
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -35,6 +35,20 @@ def _fmt(ms: tuple[float, float], digits: int = 2) -> str:
     return f"{ms[0]:.{digits}f} ± {ms[1]:.{digits}f}"
 
 
+def _known(x: float | None) -> float:
+    """A Procrustes error that must exist (the world publishes its ground truth)."""
+    if x is None:
+        raise ValueError("an embedding has no Procrustes error: the world gave no ground truth")
+    return float(x)
+
+
+class _GridRow(TypedDict):
+    case: str
+    first: tuple[float, float]
+    final: tuple[float, float]
+    runs: int
+
+
 # --- jobs (top-level functions: picklable for worker processes) ----------------------------------
 
 
@@ -46,7 +60,7 @@ def job_grid(seed: int, barrier: bool, steps: int, policy: str = "lspi") -> dict
     w = GridWorld(seed=seed, barrier=barrier)
     p = GridworldProgram(w.spec(), seed=seed, policy=policy, samples_per_iteration=400 if policy == "lspi" else 50)
     run = run_inprocess(w, p, steps)
-    return {"seed": seed, "barrier": barrier, "policy": policy, "errors": [float(e) for e in run.errors]}
+    return {"seed": seed, "barrier": barrier, "policy": policy, "errors": [_known(e) for e in run.errors]}
 
 
 def job_learning(seed: int, steps: int, every: int, supersample: int) -> dict:
@@ -118,13 +132,20 @@ def job_vergence(seed: int, world: str, iterations: int) -> dict:
     from sensorimotor.agent.programs.vergence import VergenceProgram
     from sensorimotor.tools.inprocess import run_inprocess
     from sensorimotor.worlds.registry import make_world
+    from sensorimotor.worlds.stereo_pair import StereoPairWorld
+    from sensorimotor.worlds.vergence import VergenceWorld
 
     w = make_world(world, None, seed, {})
+    if not isinstance(w, VergenceWorld | StereoPairWorld):
+        raise TypeError(f"world {world!r} is not a vergence world (no perceptual goal)")
     goals = []
     for st in range(w.spec().n_starts):
         w.reset(start=st)
         goals.append(int(w.goal))
-    truth = np.asarray(w.truth().tensors["positions"][:, 0], dtype=np.float64)
+    world_truth = w.truth()
+    if world_truth is None:
+        raise ValueError(f"world {world!r} gives no ground truth")
+    truth = np.asarray(world_truth.tensors["positions"][:, 0], dtype=np.float64)
     p = VergenceProgram(w.spec(), seed=seed)
     run = run_inprocess(w, p, 40000, stop_when=lambda r: len(r.embeddings) >= iterations)
     w.close()
@@ -150,6 +171,8 @@ def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, m
     elif kind == "random":
         return {"kind": kind, "seed": seed, "curve": [(0, M.random_agent(seed, n_eval))]}
     elif kind == "live":
+        if morph_at is None:
+            raise ValueError("the live morph run needs morph_at")
         r = M.visual(
             seed,
             train,
@@ -161,7 +184,12 @@ def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, m
             watch_after=morph_at // 2,
         )
     else:
-        body = {"baseline-1.0": {}, "baseline-1.4": {"baseline": 1.4}, "vertical": {"vertical": True}}[kind]
+        bodies: dict[str, dict[str, Any]] = {
+            "baseline-1.0": {},
+            "baseline-1.4": {"baseline": 1.4},
+            "vertical": {"vertical": True},
+        }
+        body = bodies[kind]
         r = M.visual(seed, train, every, n_eval, **body)
     return {
         "kind": kind,
@@ -191,7 +219,7 @@ def gridworld(runs: int, quick: bool, workers: int, out: str) -> dict:
         (s, False, 10000, "random") for s in range(runs)
     ]
     res = _pool_map(job_grid, jobs, workers)
-    table = []
+    table: list[_GridRow] = []
     for name, sel in (
         ("plain", lambda r: not r["barrier"] and r["policy"] == "lspi"),
         ("barrier", lambda r: r["barrier"]),
@@ -394,7 +422,7 @@ def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
     train, every, n_eval = (30_000, 10_000, 20) if quick else (100_000, 10_000, 100)
     morph_at = train
     kinds = ("baseline-1.0", "baseline-1.4", "vertical", "true")
-    jobs = [(k, s, train, every, n_eval) for k in kinds for s in range(runs)]
+    jobs: list[tuple[Any, ...]] = [(k, s, train, every, n_eval) for k in kinds for s in range(runs)]
     jobs += [("live", s, 2 * train, every, n_eval, morph_at) for s in range(max(1, runs // 2))]
     jobs += [("random", s, train, every, n_eval) for s in range(runs)]
     res = _pool_map(job_mountaincar, jobs, workers)

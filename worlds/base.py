@@ -16,6 +16,20 @@ from sensorimotor.protocol.params import ParamError, describe, format_value, par
 
 @dataclass(frozen=True)
 class StepResult:
+    """What a world returns from `reset` and `step`.
+
+    Attributes
+    ----------
+    tensors : dict of str to ndarray
+        One tensor per sensor of the spec.
+    reward : float
+        The reward received on entering this state (0 after a reset).
+    done : bool
+        Whether the episode ended.
+    info : dict
+        Extra information for the caller (never sent on the bus).
+    """
+
     tensors: dict[str, np.ndarray]
     reward: float = 0.0
     done: bool = False
@@ -28,7 +42,7 @@ class PerturbationError(ValueError):
 
 @dataclass(frozen=True)
 class NoParams:
-    """A world without parameters."""
+    """The parameters of a world without parameters."""
 
 
 @dataclass(frozen=True)
@@ -63,7 +77,39 @@ class World(abc.ABC):
 
     A world declares its parameters once, as a frozen dataclass (see `protocol.params`) named by the
     class attribute `Params`; its constructor takes `(world_id, seed, params=None, **overrides)` and
-    keeps the parsed instance as `self.params`.
+    keeps the parsed instance as `self.params`. A subclass implements `spec`, `reset` and `step`,
+    and may implement `perturb`, `truth`, `frame` and `close`. `Lockstep` drives it, in-process
+    (`tools.inprocess.run_inprocess`) or over the bus (`WorldNode`).
+
+    Parameters
+    ----------
+    world_id : str, default="w0"
+        The world's id on the bus.
+    seed : int, default=0
+        Seeds `self.rng`, the world's only source of randomness.
+
+    Attributes
+    ----------
+    kind : str
+        The world kind (its registry name).
+    max_episode_steps : int
+        Steps after which an episode ends.
+    Params : type
+        The parameter dataclass.
+    params : Params instance
+        The parsed parameters.
+    rng : numpy.random.Generator
+        The world's random generator.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sensorimotor.worlds.gridworld import GridWorld
+    >>> with GridWorld("grid0", seed=1, size=5) as w:
+    ...     r = w.reset(start=0)
+    ...     r = w.step(np.array([1.0]))
+    >>> w.spec().world_id
+    'grid0'
     """
 
     kind: str = "world"
@@ -71,6 +117,9 @@ class World(abc.ABC):
     Params: ClassVar[type] = NoParams
     #: perturbation kind -> its parameter dataclass (declared once; `perturbation_params` parses)
     Perturbations: ClassVar[Mapping[str, type]] = {}
+    # the parsed instance of `Params`; Any because a subclass may declare other parameters than its
+    # base (MountainCarWorld extends VergenceWorld with its own MountainCarWorldParams)
+    params: Any
 
     def __init__(self, world_id: str = "w0", seed: int = 0) -> None:
         self.world_id = world_id
@@ -78,14 +127,56 @@ class World(abc.ABC):
         self.rng = np.random.default_rng(seed)
 
     @abc.abstractmethod
-    def spec(self) -> WorldSpec: ...
+    def spec(self) -> WorldSpec:
+        """What the world is: its sensors, action space, reward range, program and start states.
+
+        Returns
+        -------
+        WorldSpec
+            Constant for the world's lifetime (a perturbation changes the body, not the spec).
+        """
 
     @abc.abstractmethod
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
-        """Begin an episode from start state `start` (0..n_starts-1) or a random one (None)."""
+        """Begin an episode from start state `start` (0..n_starts-1) or a random one (None).
+
+        Parameters
+        ----------
+        seed : int or None, default=None
+            Reseed `self.rng` first (None: keep the generator).
+        start : int or None, default=None
+            The start state; None (or negative) draws one at random.
+
+        Returns
+        -------
+        StepResult
+            The first observation of the episode (reward 0).
+
+        Raises
+        ------
+        ValueError
+            If `start` is out of range (`Lockstep` then refuses the reset).
+        """
 
     @abc.abstractmethod
-    def step(self, action: np.ndarray) -> StepResult: ...
+    def step(self, action: np.ndarray) -> StepResult:
+        """Apply one action.
+
+        Parameters
+        ----------
+        action : ndarray
+            float64, one value per action dimension (discrete: ``action[0]`` is the index).
+
+        Returns
+        -------
+        StepResult
+            The next observation, the reward received on entering it, and whether the episode ended.
+
+        Raises
+        ------
+        ValueError
+            If the action cannot be applied (`Lockstep` refuses it and starts a new episode).
+        """
 
     def pick_start(self, seed: int | None, start: int | None, n_starts: int) -> int:
         """For `reset`: reseed if asked, draw a random start state when `start` is None or negative,
@@ -124,7 +215,15 @@ class World(abc.ABC):
         raise PerturbationError(f"world kind {self.kind!r} has no perturbation {control.kind!r}")
 
     def truth(self) -> Truth | None:
-        """Ground truth for evaluation only (never fed to learners)."""
+        """Ground truth for evaluation only (never fed to learners).
+
+        Returns
+        -------
+        Truth or None
+            ``tensors["positions"]``: the true coordinates of the start states (or points) the
+            embeddings are scored against; None for a world without truth (the default). It may
+            change after a perturbation.
+        """
         return None
 
     def frame(self) -> np.ndarray | None:
@@ -132,7 +231,7 @@ class World(abc.ABC):
         return None
 
     def close(self) -> None:
-        pass
+        """Release what the world holds (a physics server...); the default does nothing."""
 
     def __enter__(self) -> World:
         return self

@@ -21,6 +21,20 @@ class BenchWorldParams:
 
 
 class BenchWorld(World):
+    """A world for measuring the loop: a constant float32 observation of `obs_bytes` bytes, two actions.
+
+    Parameters
+    ----------
+    world_id : str, default="bench"
+        The world's id on the bus.
+    seed : int, default=0
+        Seeds the (constant) observation.
+    params : BenchWorldParams or None, default=None
+        The parameters (default: `BenchWorldParams()`).
+    **overrides
+        Parameter values applied over `params`.
+    """
+
     kind = "bench"
     Params = BenchWorldParams
 
@@ -30,23 +44,26 @@ class BenchWorld(World):
         super().__init__(world_id, seed)
         self.params = prm = parse(BenchWorldParams, overrides, name=self.kind, base=params)
         obs_bytes, episode_steps = prm.obs_bytes, prm.episode_steps
-        self.frame = self.rng.random(obs_bytes // 4, dtype=np.float32)
+        self.obs = self.rng.random(obs_bytes // 4, dtype=np.float32)
         self.max_episode_steps = episode_steps
         self.t = 0
 
     def spec(self) -> WorldSpec:
+        """One float32 sensor ``frame`` and two actions, for the ``echo`` program."""
         return WorldSpec(
             self.world_id,
             self.kind,
-            (SensorSpec("frame", "float32", self.frame.shape),),
+            (SensorSpec("frame", "float32", self.obs.shape),),
             ActionSpace(n=2),
             program="echo",
         )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        """Start an episode (the observation never changes)."""
         self.t = 0
-        return StepResult({"frame": self.frame})
+        return StepResult({"frame": self.obs})
 
     def step(self, action: np.ndarray) -> StepResult:
+        """Count a step; the reward is ``action[0]``, the episode ends after `episode_steps`."""
         self.t += 1
-        return StepResult({"frame": self.frame}, float(action[0]), self.t >= self.max_episode_steps)
+        return StepResult({"frame": self.obs}, float(action[0]), self.t >= self.max_episode_steps)

@@ -49,6 +49,38 @@ class BarrierGridWorldParams(GridWorldParams):
 
 
 class GridWorld(World):
+    """The gridworld of Fig 5.1: an opaque state id in, one of 4 (or 8) moves out, reward 1 at the goal.
+
+    Parameters
+    ----------
+    world_id : str, default="g0"
+        The world's id on the bus.
+    seed : int, default=0
+        Seeds the random starts and the shuffle of the state ids.
+    params : GridWorldParams or None, default=None
+        The parameters (default: `GridWorldParams()`).
+    **overrides
+        Parameter values applied over `params` (``size=7``, ``barrier=True``...), checked by
+        `protocol.params.parse`.
+
+    Raises
+    ------
+    ParamError
+        For an unknown or invalid parameter.
+    ValueError
+        If the goal is not a free cell.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = GridWorld("grid0", seed=0, size=5)
+    >>> w.spec().n_starts
+    25
+    >>> r = w.reset(start=0)
+    >>> r.tensors["state"].shape
+    (1,)
+    """
+
     kind = "gridworld"
     Params = GridWorldParams
 
@@ -76,6 +108,7 @@ class GridWorld(World):
         self.t = 0
 
     def spec(self) -> WorldSpec:
+        """One int32 sensor ``state`` (the opaque id), discrete moves, one start state per free cell."""
         n = len(self.cells)
         return WorldSpec(
             world_id=self.world_id,
@@ -99,12 +132,14 @@ class GridWorld(World):
         return StepResult({"state": np.array([sid], dtype=np.int32)}, reward, done)
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        """Start in free cell `start` (in `truth` order) or a random one; ``done`` at once on the goal."""
         start = self.pick_start(seed, start, len(self.cells))
         self.pos = self.cells[start]
         self.t = 0
         return self._obs(0.0, self.pos == self.goal)
 
     def step(self, action: np.ndarray) -> StepResult:
+        """Move (``action[0]`` indexes the moves; into a wall or off the grid stays put); reward 1 on the goal."""
         a = int(np.asarray(action).reshape(-1)[0])
         if not 0 <= a < len(self.moves):
             raise ValueError(f"action {a} out of range 0..{len(self.moves) - 1}")
@@ -117,5 +152,6 @@ class GridWorld(World):
         return self._obs(1.0 if at_goal else 0.0, at_goal or self.t >= self.max_episode_steps)
 
     def truth(self) -> Truth:
+        """The (x, y) cell of every start state, row i for start state i."""
         pos = np.array(self.cells, dtype=np.float64)
         return Truth(self.world_id, "start_states", {"positions": pos})

@@ -29,6 +29,17 @@ class Lockstep:
         The id observations carry.
     session : str
         The world process's session (a new value tells the agent the world restarted).
+
+    Examples
+    --------
+    >>> from sensorimotor.protocol.messages import Action
+    >>> from sensorimotor.worlds.gridworld import GridWorld
+    >>> lock = Lockstep(GridWorld("grid0"), "grid0")
+    >>> obs = lock.observation()
+    >>> lock.advance(Action("grid0", obs.step, (0.0,))) is None
+    True
+    >>> lock.step
+    1
     """
 
     def __init__(self, world: World, world_id: str, session: str = "") -> None:
@@ -42,7 +53,17 @@ class Lockstep:
         self.result: StepResult = world.reset(start=None)
 
     def observation(self, timestamp: float = 0.0) -> Observation:
-        """The observation of the current step."""
+        """The observation of the current step.
+
+        Parameters
+        ----------
+        timestamp : float, default=0.0
+            Seconds since the epoch to stamp it with.
+
+        Returns
+        -------
+        Observation
+        """
         r = self.result
         return Observation(
             self.world_id,
@@ -64,7 +85,19 @@ class Lockstep:
         self.t = 0
 
     def advance(self, action: Action) -> WorldEvent | None:
-        """Apply the action that answers the current step and move to the next step."""
+        """Apply the action that answers the current step and move to the next step.
+
+        Parameters
+        ----------
+        action : Action
+            The answer to the current step (a reset when the episode is done or it asks for one).
+
+        Returns
+        -------
+        WorldEvent or None
+            What was refused, when the world could not apply the action (a new episode from a
+            random start was begun instead); None otherwise.
+        """
         refused: WorldEvent | None = None
         try:
             if self.result.done or action.reset:

@@ -61,6 +61,30 @@ class MountainCarWorldParams:
 
 
 class MountainCarWorld(VergenceWorld):
+    """The visual mountain car (ch. 8): the vergence robot drives along its track under the
+    mountain-car dynamics and sees only its two foveae.
+
+    Actions: 0 converge, 1 diverge (the eyes move, the car does not), 2 reverse, 3 coast,
+    4 forward (one car step; the eyes return to parallel).
+
+    Parameters
+    ----------
+    world_id : str, default="mountaincar"
+        The world's id on the bus.
+    seed : int, default=0
+        Seeds the world's random generator (random starts).
+    params : MountainCarWorldParams or None, default=None
+        The parameters (default: `MountainCarWorldParams()`).
+    **overrides
+        Parameter values applied over `params` (``k=v`` strings or typed values), checked by
+        `protocol.params.parse`.
+
+    Raises
+    ------
+    ValueError
+        If the sign comes within 0.2 m of the robot anywhere on the track.
+    """
+
     kind = "mountaincar"
     Params = MountainCarWorldParams
 
@@ -122,12 +146,14 @@ class MountainCarWorld(VergenceWorld):
 
     # geometry ----------------------------------------------------------------------------------
     def z_of(self, x: float | np.ndarray) -> np.ndarray:
+        """The robot's distance to the sign, in m, at track position(s) `x`."""
         return self.sign_distance - np.asarray(x, dtype=np.float64) * self.track_scale
 
     def _cell(self) -> int:
         return int(round((self.sign_distance - self.x * self.track_scale) / self.render_grid))
 
     def render(self) -> tuple[np.ndarray, np.ndarray]:
+        """The foveae at the current cell of track and vergence, from the render cache when possible."""
         key = (self._cell(), int(round(self.theta / self.step_rad)))
         hit = self._images.get(key)
         if hit is not None:
@@ -157,6 +183,7 @@ class MountainCarWorld(VergenceWorld):
 
     # World interface ---------------------------------------------------------------------------
     def spec(self) -> WorldSpec:
+        """Two float32 foveae ``left`` and ``right``; five actions (see the class)."""
         f = (self.fovea, self.fovea)
         return WorldSpec(
             world_id=self.world_id,
@@ -182,6 +209,9 @@ class MountainCarWorld(VergenceWorld):
         )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        """Start at state `start`: an evenly spaced position at rest (< n_positions), a fixed
+        evaluation state, or a random (x, v) for None or -1; the eyes parallel.
+        """
         if seed is not None:
             self.rng = np.random.default_rng(seed)
         if start is None or start < 0:
@@ -195,6 +225,9 @@ class MountainCarWorld(VergenceWorld):
         return self._obs(0.0, False)
 
     def step(self, action: np.ndarray) -> StepResult:
+        """A vergence step (reward 1 on the perceptual goal) or a car step (reward 1 and done at the
+        goal; done after `max_car_steps`).
+        """
         a = int(np.asarray(action).reshape(-1)[0])
         self.t += 1
         if a in (CONVERGE, DIVERGE):
@@ -216,6 +249,7 @@ class MountainCarWorld(VergenceWorld):
         return out
 
     def truth(self) -> Truth:
+        """The vergence angle (``positions``), distance and car state (``x``, ``v``) per start state."""
         return Truth(
             self.world_id,
             "start_states",

@@ -15,6 +15,8 @@ import numpy as np
 
 @dataclass(frozen=True)
 class MountainCarParams:
+    """The constants of Eq 8.1-8.6 (see the module docstring)."""
+
     p: float = 0.001
     w: float = math.pi / 4
     phi: float = math.pi / 2
@@ -38,6 +40,7 @@ def step(x: float, v: float, a: int, prm: MountainCarParams = MountainCarParams(
 
 
 def random_state(rng: np.random.Generator, prm: MountainCarParams = MountainCarParams()) -> tuple[float, float]:
+    """A random state before the goal: x uniform in [x_min, goal), v uniform in [-v_max, v_max)."""
     return float(rng.uniform(prm.x_min, prm.goal)), float(rng.uniform(-prm.v_max, prm.v_max))
 
 

@@ -39,6 +39,8 @@ log = logging.getLogger("sme.world")
 
 @dataclass
 class NodeStats:
+    """What a WorldNode did: counts, and step latencies when asked to measure (`sme bench loop`)."""
+
     steps: int = 0
     episodes: int = 0
     resends: int = 0
@@ -52,6 +54,7 @@ class NodeStats:
     measured_steps: int = 0
 
     def summary(self) -> dict:
+        """The counts, rates and latency percentiles (ms) as a JSON-ready dict."""
         lat = np.asarray(self.latencies) * 1e3
         out = {
             "steps": self.steps,
@@ -102,7 +105,41 @@ class _ActionSlot:
 
 
 class WorldNode:
-    """Runs one World on a Bus until stopped or a bound (`max_steps`, `seconds`) is reached."""
+    """Runs one World on a Bus until stopped or a bound (`max_steps`, `seconds`) is reached.
+
+    The node answers the spec and truth queries, declares the world's liveliness token, applies
+    controls between steps, and steps the world in lockstep with the agent's actions.
+
+    Parameters
+    ----------
+    world : World
+        The simulator to serve.
+    bus : Bus
+        An open bus session (the node does not close it).
+    world_id : str or None, default=None
+        The id on the bus (default: ``world.world_id``); checked with `keys.check_id`.
+    resend : float, default=0.5
+        Seconds without an answer after which the same observation is published again.
+    max_steps : int or None, default=None
+        Stop after this many answered steps.
+    seconds : float or None, default=None
+        Stop after this many seconds.
+    measure : bool, default=False
+        Record step latencies in `stats` (after `warmup` steps).
+    warmup : int, default=0
+        Steps not measured.
+    image_every : int, default=10
+        Publish a camera frame every this many steps, for worlds that override `World.frame`
+        (0: never).
+
+    Examples
+    --------
+    >>> from sensorimotor.protocol.bus import Bus, BusConfig
+    >>> from sensorimotor.worlds.gridworld import GridWorld
+    >>> with Bus(BusConfig.for_role("world")) as bus:  # doctest: +SKIP
+    ...     node = WorldNode(GridWorld("grid0"), bus, max_steps=1000)
+    ...     stats = node.run()
+    """
 
     def __init__(
         self,
@@ -226,6 +263,8 @@ class WorldNode:
             log.debug("world %s: event not published: %s", self.world_id, e)
 
     def install_signal_handlers(self) -> None:
+        """Stop the node cleanly on SIGINT and SIGTERM (main thread only)."""
+
         def stop(signum, frame):  # noqa: ARG001
             self.stop_event.set()
             self._slot.wake()
@@ -234,10 +273,18 @@ class WorldNode:
         signal.signal(signal.SIGTERM, stop)
 
     def stop(self) -> None:
+        """Ask `run` to return after the current wait (thread-safe)."""
         self.stop_event.set()
         self._slot.wake()
 
     def run(self) -> NodeStats:
+        """Serve the world until stopped or a bound is reached.
+
+        Returns
+        -------
+        NodeStats
+            What was done (also in `self.stats`).
+        """
         wid = self.world_id
         spec_bytes = codec.encode(self._spec)
         bus = self.bus

@@ -8,10 +8,20 @@ from __future__ import annotations
 import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from sensorimotor.protocol.params import ParamError, parse, unknown_name
 from sensorimotor.worlds.base import World
+
+
+class WorldClass(Protocol):
+    """A World subclass seen as a constructor: every world kind takes `(world_id, seed, params)`
+    (the base `World.__init__` takes no parameters, so `type[World]` cannot be called this way)."""
+
+    Params: type
+    Perturbations: Mapping[str, type]
+
+    def __call__(self, world_id: str, seed: int = 0, params: Any = None, /) -> World: ...
 
 
 @dataclass(frozen=True)
@@ -23,10 +33,12 @@ class WorldKind:
     params: str
     summary: str
 
-    def world_class(self) -> type[World]:
+    def world_class(self) -> WorldClass:
+        """Import the world's module and return its World class."""
         return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.cls)
 
-    def params_type(self) -> type:
+    def params_type(self) -> type[Any]:
+        """Import the world's module and return its parameter dataclass."""
         return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.params)
 
 
@@ -55,7 +67,7 @@ def world_kind(name: str) -> WorldKind:
         raise ParamError(unknown_name("world", name, sorted(WORLDS))) from None
 
 
-def world_params(name: str) -> type:
+def world_params(name: str) -> type[Any]:
     """The parameter dataclass of world kind `name`."""
     return world_kind(name).params_type()
 
@@ -71,7 +83,34 @@ def parse_world_params(name: str, params: Mapping[str, Any] | None = None) -> An
 
 
 def make_world(name: str, world_id: str | None = None, seed: int = 0, params: Mapping[str, Any] | None = None) -> World:
-    """Build world kind `name`; `params` are validated against its declaration first."""
+    """Build a world by kind name; `params` are validated against its declaration first.
+
+    Parameters
+    ----------
+    name : str
+        A world kind of `WORLDS` (``gridworld``, ``retina``, ``vergence``...).
+    world_id : str or None, default=None
+        The world's id on the bus (default: `name`).
+    seed : int, default=0
+        Seeds the world's random generator.
+    params : mapping or None, default=None
+        Parameters as ``k=v`` strings or typed values (default: the kind's defaults).
+
+    Returns
+    -------
+    World
+
+    Raises
+    ------
+    ParamError
+        For an unknown kind (with a suggestion) or an invalid parameter.
+
+    Examples
+    --------
+    >>> w = make_world("gridworld", "grid0", seed=1, params={"size": "5"})
+    >>> w.spec().n_starts
+    25
+    """
     kind = world_kind(name)
     prm = parse(kind.params_type(), params or {}, name=name)
     return kind.world_class()(world_id or name, seed, prm)

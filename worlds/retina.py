@@ -85,6 +85,32 @@ class NoiseParams:
 
 
 class RetinaWorld(World):
+    """A foveated retina on a pan/tilt camera (Fig 4.1): field activations in, a saccade out.
+
+    Episodes are ballistic: a random reposition, one saccade (degrees of pan and tilt), reward =
+    total activation after it, done. The agent learns where each field is from that alone.
+
+    Parameters
+    ----------
+    world_id : str, default="retina"
+        The world's id on the bus.
+    seed : int, default=0
+        Seeds the world's random generator (repositions, noise).
+    params : RetinaWorldParams or None, default=None
+        The parameters (default: `RetinaWorldParams()`).
+    **overrides
+        Parameter values applied over `params` (``k=v`` strings or typed values), checked by
+        `protocol.params.parse`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> with RetinaWorld(seed=0) as w:  # doctest: +SKIP
+    ...     r = w.reset()
+    ...     r = w.step(np.array([2.0, -1.0]))  # pan 2 degrees right, tilt 1 down
+    ...     reward = r.reward
+    """
+
     kind = "retina"
     max_episode_steps = 1
     Params = RetinaWorldParams
@@ -230,6 +256,7 @@ class RetinaWorld(World):
 
     # World interface ---------------------------------------------------------------------------
     def spec(self) -> WorldSpec:
+        """One float32 sensor ``fields`` (every receptive field, shuffled order), a 2-d saccade box."""
         m = self.max_saccade
         return WorldSpec(
             world_id=self.world_id,
@@ -254,6 +281,7 @@ class RetinaWorld(World):
         )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        """Point the camera at a random offset from the target (`start` is ignored: starts are random)."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
         u, v = self.rng.uniform(-self.reposition_px, self.reposition_px, 2)
@@ -261,6 +289,7 @@ class RetinaWorld(World):
         return StepResult({"fields": self.render()}, 0.0, False)
 
     def step(self, action: np.ndarray) -> StepResult:
+        """One saccade ``(pan, tilt)`` in degrees (clipped); reward = total activation; always done."""
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         if a.shape != (2,) or not np.isfinite(a).all():
             raise ValueError(f"a saccade is 2 finite numbers (pan, tilt), got {a.tolist()}")
@@ -290,11 +319,15 @@ class RetinaWorld(World):
         return "heal: lesion, reversal and noise undone"
 
     def truth(self) -> Truth:
+        """Each field's position in action units (minus the saccade that centres it; tilt flipped
+        while reversed), and its centre in retina px (``pixels``).
+        """
         pos = -self.saccade_for(self.centres[:, 0], self.centres[:, 1])
         if self.reversed:
             pos[:, 1] *= -1
         return Truth(self.world_id, "fields", {"positions": pos, "pixels": self.centres.copy()})
 
     def close(self) -> None:
+        """Disconnect the PyBullet client."""
         disconnect(self._client)
         self._client = None

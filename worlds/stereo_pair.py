@@ -52,6 +52,22 @@ class StereoPairParams:
 
 
 class StereoPairWorld(World):
+    """Vergence on the Middlebury motorcycle stereo pair (ch. 7.2.2): two foveal windows in,
+    converge or diverge (one pixel) out, reward 1 at the perceptual goal.
+
+    Parameters
+    ----------
+    world_id : str, default="stereo"
+        The world's id on the bus.
+    seed : int, default=0
+        Seeds the world's random generator (random starts).
+    params : StereoPairParams or None, default=None
+        The parameters (default: `StereoPairParams()`).
+    **overrides
+        Parameter values applied over `params` (``k=v`` strings or typed values), checked by
+        `protocol.params.parse`.
+    """
+
     kind = "stereo"
     Params = StereoPairParams
 
@@ -96,6 +112,7 @@ class StereoPairWorld(World):
         )
 
     def spec(self) -> WorldSpec:
+        """Two float32 foveae ``left`` and ``right``; actions converge (0) and diverge (1)."""
         f = (2 * self.radius + 1,) * 2
         return WorldSpec(
             self.world_id,
@@ -117,6 +134,7 @@ class StereoPairWorld(World):
         return StepResult({"left": left, "right": right}, reward, done)
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        """Rest the left window on salient point `start` (or a random one), the right one at disparity 0."""
         start = self.pick_start(seed, start, len(self.points))
         self.row, self.col = (int(v) for v in self.points[start])
         if start not in self._goals:
@@ -126,6 +144,7 @@ class StereoPairWorld(World):
         return self._obs(0.0, self.goal == 0)
 
     def step(self, action: np.ndarray) -> StepResult:
+        """Shift the right window one pixel; reward 1 and done on reaching the perceptual goal."""
         self.k = verge(self.k, action, self.max_shift)
         self.t += 1
         if self.k == self.goal:
@@ -133,5 +152,6 @@ class StereoPairWorld(World):
         return self._obs(0.0, self.t >= self.max_episode_steps)
 
     def truth(self) -> Truth:
+        """The dataset disparity at each start point (``positions``) and the points (``pixels``, row, col)."""
         d = self.disparity[self.points[:, 0], self.points[:, 1]].astype(np.float64)
         return Truth(self.world_id, "start_states", {"positions": d[:, None], "pixels": self.points.astype(np.float64)})

@@ -16,7 +16,7 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pybullet as p
@@ -91,8 +91,33 @@ class MorphParams:
 
 
 class VergenceWorld(World):
+    """Depth from vergence (ch. 7): two foveae in, converge or diverge out, reward 1 at the perceptual goal.
+
+    Start states are track positions; the truth is the vergence angle that fixates the sign from
+    each of them (Eq 7.5), which the agent's embedding of its vergence traces is scored against.
+
+    Parameters
+    ----------
+    world_id : str, default="vergence"
+        The world's id on the bus.
+    seed : int, default=0
+        Seeds the world's random generator (random starts).
+    params : VergenceWorldParams or None, default=None
+        The parameters (default: `VergenceWorldParams()`).
+    **overrides
+        Parameter values applied over `params` (``k=v`` strings or typed values), checked by
+        `protocol.params.parse`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> with VergenceWorld(seed=0, n_starts=4) as w:  # doctest: +SKIP
+    ...     r = w.reset(start=0)
+    ...     r = w.step(np.array([0.0]))  # converge one step
+    """
+
     kind = "vergence"
-    Params = VergenceWorldParams
+    Params: ClassVar[type] = VergenceWorldParams
     Perturbations = {"morph": MorphParams, "heal": HealParams}
 
     def __init__(
@@ -200,6 +225,7 @@ class VergenceWorld(World):
         return np.arctan2(self.baseline / 2, np.asarray(z, dtype=np.float64))
 
     def render(self) -> tuple[np.ndarray, np.ndarray]:
+        """The left and right foveae at the current position and vergence, float32 grey in [0, 1]."""
         imgs = []
         up = [0.0, 1.0, 0.0] if self.vertical else [0.0, 0.0, 1.0]
         for pos, d in self._eyes():
@@ -234,6 +260,7 @@ class VergenceWorld(World):
 
     # World interface ---------------------------------------------------------------------------
     def spec(self) -> WorldSpec:
+        """Two float32 foveae ``left`` and ``right``; actions converge (0) and diverge (1)."""
         f = (self.fovea, self.fovea)
         return WorldSpec(
             world_id=self.world_id,
@@ -259,6 +286,7 @@ class VergenceWorld(World):
         return StepResult({"left": left, "right": right}, reward, done)
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
+        """Move to track position `start` (or a random one) with the eyes parallel."""
         start = self.pick_start(seed, start, len(self.distances))
         self.z = float(self.distances[start])
         if start not in self._goal_cache:  # the goal of a start state is fixed until the body changes
@@ -268,6 +296,7 @@ class VergenceWorld(World):
         return self._obs(0.0, False)
 
     def step(self, action: np.ndarray) -> StepResult:
+        """Turn the eyes one step; reward 1 and done on reaching the perceptual goal."""
         self.k = verge(self.k, action, self.max_episode_steps)
         self.t += 1
         self.theta = self.k * self.step_rad
@@ -290,6 +319,7 @@ class VergenceWorld(World):
         return f"{what}: baseline {self.baseline} m, cameras {'vertical' if self.vertical else 'horizontal'}"
 
     def truth(self) -> Truth:
+        """The true per-eye vergence angle (``positions``) and distance to the sign per start state."""
         return Truth(
             self.world_id,
             "start_states",
@@ -297,5 +327,6 @@ class VergenceWorld(World):
         )
 
     def close(self) -> None:
+        """Disconnect the PyBullet client."""
         disconnect(self._c)
         self._c = None

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -15,11 +16,18 @@ from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
 from sensorimotor.tools.common import require
 
 
+class _Detector(Protocol):
+    """What the benchmark needs of a detector: one observation in, an alarm flag out."""
+
+    def update(self, x: float) -> bool: ...
+
+
 class _River:
     """river detectors behind our interface (update -> flag)."""
 
-    def __init__(self, make: Callable[[], object], name: str) -> None:
-        self._d = make()
+    def __init__(self, make: Callable[[], Any], name: str) -> None:
+        # river's detectors are untyped here (its `drift_detected` is a property of each class)
+        self._d: Any = make()
         self.name = name
 
     def update(self, x: float) -> bool:
@@ -27,16 +35,16 @@ class _River:
         return bool(self._d.drift_detected)
 
 
-def candidates() -> dict[str, Callable[[], object]]:
+def candidates() -> dict[str, Callable[[], _Detector]]:
     drift = require("river.drift", package="river")
 
-    out: dict[str, Callable[[], object]] = {name: cls for name, cls in DETECTORS.items()}
+    out: dict[str, Callable[[], _Detector]] = {name: cls for name, cls in DETECTORS.items()}
     out["river.ADWIN"] = lambda: _River(drift.ADWIN, "river.ADWIN")
     out["river.PageHinkley(down)"] = lambda: _River(lambda: drift.PageHinkley(mode="down"), "river.PageHinkley")
     return out
 
 
-def score_stream(make: Callable[[], object], x: np.ndarray, change: int) -> tuple[int, int | None]:
+def score_stream(make: Callable[[], _Detector], x: np.ndarray, change: int) -> tuple[int, int | None]:
     """(false alarms before `change`, delay of the first alarm at or after it)."""
     d = make()
     fa, delay = 0, None

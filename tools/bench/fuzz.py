@@ -313,7 +313,9 @@ def _event_refused(payload: bytes) -> bool:
 class _Tail:
     """Reads a child's stderr on a thread (so its pipe never fills); counts tracebacks."""
 
-    def __init__(self, stream: IO[str]) -> None:
+    def __init__(self, stream: IO[str] | None) -> None:
+        if stream is None:
+            raise ValueError("the child's stderr must be a pipe")
         self.tracebacks = 0
         self.last: list[str] = []
         threading.Thread(target=self._read, args=(stream,), daemon=True).start()
@@ -360,8 +362,10 @@ def _status(bus: Bus) -> AgentStatus | None:
         return None
 
 
-def _counts(st: AgentStatus) -> dict[str, int]:
+def _counts(st: AgentStatus | None) -> dict[str, int]:
     """The counters the fuzz messages should land in, plus the good link's rejections by kind."""
+    if st is None:
+        raise RuntimeError("the agent did not answer the status query")
     link = next((ln for ln in st.links if ln.world_id == GOOD), None)
     rejected = dict(link.rejected) if link is not None else {}
     out = {c: int(st.counters.get(c, 0)) for c in COUNTERS if c != "rejected"}
@@ -463,16 +467,12 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
                         wid = str(fz.rng.choice([f"fz~{i}", f"fz {i}", "f" * 65 + str(i), f"fz@{i}"]))
                     else:
                         wid = f"fz-{i}"
-                        if variant == "error_reply":
+                        data = b"" if variant == "error_reply" else fz.fake_spec(wid, variant)
 
-                            def answer(k: str, p: bytes | None) -> bytes:
-                                raise LookupError("this fake world has no spec")
-
-                        else:
-                            data = fz.fake_spec(wid, variant)
-
-                            def answer(k: str, p: bytes | None, data: bytes = data) -> bytes:
-                                return data
+                        def answer(k: str, p: bytes | None, data: bytes = data) -> bytes:
+                            if not data:
+                                raise LookupError("this fake world has no spec")  # an error reply
+                            return data
 
                         handles.append(bus.queryable(keys.world_spec(wid), answer, codec.schema_name(WorldSpec)))
                     handles.append(bus.token(keys.alive_world(wid)))

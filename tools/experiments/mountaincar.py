@@ -100,7 +100,9 @@ def true_state(
     """The same Sarsa(lambda) and tile coding, given the true position and velocity."""
     prm = MountainCarParams()
     rng = np.random.default_rng(seed)
-    coder = TileCoder([prm.x_min, -prm.v_max], [prm.x_max, prm.v_max], tiles=tiles, n_tilings=n_tilings)
+    coder = TileCoder(
+        np.array([prm.x_min, -prm.v_max]), np.array([prm.x_max, prm.v_max]), tiles=tiles, n_tilings=n_tilings
+    )
     agent = SarsaLambda(coder, 3, alpha=alpha, gamma=gamma, lam=lam, epsilon=0.0, seed=seed)
     evals = evaluation_states(n_eval)
 
