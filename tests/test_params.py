@@ -262,6 +262,7 @@ def test_every_program_declares_params_and_builds_from_defaults(name):
         "vergence": "stereo",
         "mountaincar": "mountaincar",
         "echo": "bench",
+        "generic": "gridworld",
     }[name]
     with mw(
         world, None, 0, {"supersample": "1"} if world == "retina" else {"n_eval": "2"} if world == "mountaincar" else {}

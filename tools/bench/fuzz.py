@@ -263,7 +263,9 @@ class Fuzzer:
         elif variant == "nan_bound":
             p.reward_max = float("nan")
         elif variant == "unknown_program":
+            # an unknown program falls back to the generic one, which needs at least one sensor
             p.program = p.kind = f"nosuch{int(rng.integers(100))}"
+            del p.sensors[:]
         elif variant == "no_state_sensor":
             p.sensors[0].name = "pixels"
         elif variant == "huge_states":
