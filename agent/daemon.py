@@ -145,7 +145,7 @@ class AgentDaemon:
             with self._lock:
                 pub = self._pubs.pop(key, None)
             if pub is not None:
-                self.bus.undeclare(pub._pub)
+                self.bus.undeclare(pub)
 
     def publish(self, channel: str, msg: Any) -> None:
         """Publish a link's message on its channel's key (and pass embeddings and events to `on_output`)."""

@@ -616,7 +616,10 @@ class Bus:
         return [str(r.ok.key_expr) for r in self._session.liveliness().get(key, timeout=timeout) if r.ok is not None]
 
     def undeclare(self, entity: Any) -> None:
-        """Undeclare a publisher, subscriber, queryable or token made by this bus (no error if gone)."""
+        """Undeclare a publisher (a `Publisher` or the zenoh one), subscriber, queryable or token made
+        by this bus (no error if gone)."""
+        if isinstance(entity, Publisher):
+            entity = entity._pub
         try:
             entity.undeclare()
         except Exception:  # pragma: no cover - already gone with a closed session
