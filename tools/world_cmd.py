@@ -41,6 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the world's random generator")
     p.add_argument(
+        "--external",
+        action="store_true",
+        help="leave the world to an outside controller (a Gymnasium BusEnv, see the README): the spec "
+        "says program=external and agents on the bus do not attach to it",
+    )
+    p.add_argument(
         "--resend",
         type=float,
         default=0.5,
@@ -116,6 +122,7 @@ def main_args(args: argparse.Namespace) -> int:
             seconds=args.seconds,
             measure=args.stats_json is not None,
             warmup=args.warmup,
+            external=args.external,
         )
         node.install_signal_handlers()
         stats = node.run()

@@ -39,7 +39,6 @@ from gymnasium import spaces
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import ParamError, _scalar, option, parse, suggest, table_text, unknown_name
 from sensorimotor.worlds.base import StepResult, World
-
 from sensorimotor.worlds.registry import GYM_PREFIX
 
 log = logging.getLogger("sme.world")
