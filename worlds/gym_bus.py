@@ -143,13 +143,17 @@ class BusEnv(gym.Env):
             while True:
                 self._pub.put(data)
                 if self._cv.wait_for(
-                    lambda: self._obs is not None and (self._obs.step > action.step or self._obs.session != self._session),
+                    lambda: (
+                        self._obs is not None and (self._obs.step > action.step or self._obs.session != self._session)
+                    ),
                     self.resend,
                 ):
                     assert self._obs is not None
                     return self._obs
                 if time.monotonic() > end:
-                    raise TimeoutError(f"world {self.world_id!r} did not answer step {action.step} in {self.timeout:g} s")
+                    raise TimeoutError(
+                        f"world {self.world_id!r} did not answer step {action.step} in {self.timeout:g} s"
+                    )
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         """Start a new episode (``options={"start": k}``: from start state k)."""

@@ -121,7 +121,9 @@ class SmeEnv(gym.Env):
         self.metadata = {"render_modes": ["rgb_array"] if has_frame else [], "render_fps": 30}
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             self.world.close()
-            raise ValueError(f"world {world!r} renders {self.metadata['render_modes'] or 'nothing'}, not {render_mode!r}")
+            raise ValueError(
+                f"world {world!r} renders {self.metadata['render_modes'] or 'nothing'}, not {render_mode!r}"
+            )
         self.render_mode = render_mode
         self._t = 0
         self._closed = False

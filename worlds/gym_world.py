@@ -256,7 +256,7 @@ class GymWorld(World):
         self._a0, self._na = int(act.start), int(act.n)
         self._first_reset = True
         self._obs_fn, self._sensor = self._observation_sensor()
-        self.u = self.env.unwrapped
+        self.u: Any = self.env.unwrapped
         self._starts: list[Any] = []
         self._truth: np.ndarray | None = None
         self._raw: np.ndarray | None = None
@@ -285,17 +285,17 @@ class GymWorld(World):
                 conv = lambda o: np.asarray(o, dtype=np.float32)  # noqa: E731
                 dtype = "float32"
         else:
-            box = spaces.flatten_space(space)
-            if not isinstance(box, spaces.Box):
+            flat = spaces.flatten_space(space)
+            if not isinstance(flat, spaces.Box):
                 raise ParamError(f"gym:{self.env_id}: observation space {space} cannot be flattened to a vector")
+            box = flat
             conv = lambda o: np.asarray(spaces.flatten(space, o), dtype=np.float32)  # noqa: E731
             dtype = "float32"
 
-        if dtype == "uint8":
-            lo, hi = 0.0, 255.0
-        else:
-            lo, hi = _box_range(box, self._random_observations(conv))
-        return conv, SensorSpec(SENSOR, dtype, tuple(int(d) for d in box.shape), lo, hi, f"{self.env_id} observation")
+        low, high = (0.0, 255.0) if dtype == "uint8" else _box_range(box, self._random_observations(conv))
+        return conv, SensorSpec(
+            SENSOR, dtype, tuple(int(d) for d in box.shape), low, high, f"{self.env_id} observation"
+        )
 
     def _random_observations(self, conv: Callable[[Any], np.ndarray]) -> Callable[[], np.ndarray]:
         """Observations of random steps (seeded by the world), for estimating an unbounded range."""
@@ -313,7 +313,7 @@ class GymWorld(World):
     # start states ------------------------------------------------------------------------------
     def _declare_starts(self) -> str:
         """Fill the start states, their truth and the setter; return how (for the spec and logs)."""
-        u = self.env.unwrapped
+        u: Any = self.env.unwrapped  # the environment's own attributes (P, s, state) are not typed
         grid = STATE_GRIDS.get(type(u).__name__)
         if grid is not None and hasattr(u, "state"):
             return self._grid_starts(grid)
@@ -335,7 +335,7 @@ class GymWorld(World):
         self._raw = points
         lo, hi = points.min(axis=0), points.max(axis=0)
         self._truth = (points - lo) / np.where(hi > lo, hi - lo, 1.0)
-        u = self.env.unwrapped
+        u: Any = self.env.unwrapped  # the environment's own attributes (P, s, state) are not typed
 
         def set_state(state: np.ndarray) -> Any:
             u.state = np.array(state, dtype=np.float64)
@@ -345,7 +345,7 @@ class GymWorld(World):
         return f"{len(states)} starts on a {n} x {n} grid of ({', '.join(grid.names)})"
 
     def _table_starts(self) -> str:
-        u = self.env.unwrapped
+        u: Any = self.env.unwrapped  # the environment's own attributes (P, s, state) are not typed
         P: Mapping[int, Mapping[int, list]] = u.P
         init = np.flatnonzero(np.asarray(getattr(u, "initial_state_distrib", []), dtype=float) > 0).tolist()
         if not init:
