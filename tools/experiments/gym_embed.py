@@ -45,6 +45,7 @@ def main(
         "final_error": round(errors[-1], 4) if errors else None,
         "best_error": round(min(errors), 4) if errors else None,
         "goal_reached_fraction": [round(e.metrics.get("goal_reached_fraction", 0.0), 3) for e in run.embeddings],
+        "mean_trace_length": [round(e.metrics.get("mean_trace_length", 0.0), 1) for e in run.embeddings],
     }
 
 
