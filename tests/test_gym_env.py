@@ -66,3 +66,13 @@ def test_a_gym_world_round_trips():
     obs, _ = env.reset(seed=0, options={"start": 0})
     assert env.observation_space.shape == (2,) and obs == pytest.approx(np.array([-1.2, -0.07], np.float32))
     env.close()
+
+
+def test_a_world_with_a_camera_renders_rgb_frames():
+    env = gym.make("sme/Retina-v0", params=SMALL["sme/Retina-v0"], render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+    env.close()
+    with pytest.raises(ValueError, match="renders nothing"):
+        gym.make("sme/Gridworld-v0", render_mode="rgb_array")

@@ -150,7 +150,12 @@ class SmeEnv(gym.Env):
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The world's latest camera frame (``rgb_array``), or None."""
-        return self.world.frame() if self.render_mode == "rgb_array" else None
+        if self.render_mode != "rgb_array":
+            return None
+        frame = self.world.frame()
+        if frame is not None and frame.ndim == 2:  # a grey camera: rgb_array frames have three channels
+            frame = np.repeat(frame[:, :, None], 3, axis=2)
+        return frame
 
     def close(self) -> None:
         """Release the world (twice is fine)."""
