@@ -26,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.",
     )
     p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)) + ", or gym:ENV_ID")
-    p.add_argument("--id", default=None, help="world id (default: the world name)")
+    p.add_argument("--id", default=None, help="world id (default: the world name; for gym:ENV_ID, ENV_ID)")
     p.add_argument(
         "--param",
         action="append",

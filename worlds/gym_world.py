@@ -243,8 +243,10 @@ class GymWorld(World):
         self.max_episode_steps = int(limit)
         try:
             self.env = gym.make(env_id, max_episode_steps=self.max_episode_steps, **self.env_kwargs)
-        except TypeError as e:
+        except TypeError as e:  # a keyword the constructor refused after all
             raise ParamError(f"gym:{env_id}: {e}") from None
+        except gym.error.Error as e:  # e.g. DependencyNotInstalled (Box2D, MuJoCo, ALE...)
+            raise ParamError(f"gym:{env_id} cannot be made here: {e}") from None
         self.kind = GYM_PREFIX + env_id
         act = self.env.action_space
         if not isinstance(act, spaces.Discrete):
