@@ -35,6 +35,7 @@ from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
 from sensorimotor.protocol.messages import (
+    EXTERNAL_PROGRAM,
     Action,
     AgentEvent,
     AgentStatus,
@@ -364,6 +365,10 @@ class AgentDaemon:
             return
         except (ValueError, BusError) as e:
             self._attach_failed(wid, "no_spec", e)
+            return
+        if spec.program == EXTERNAL_PROGRAM:  # an outside controller answers it (a Gymnasium BusEnv)
+            log.info("world %s is driven by an outside controller (program %r): not attached", wid, spec.program)
+            self.event(wid, EventKind.ATTACH_FAILED, "the world is driven by an outside controller", "external")
             return
         try:
             truth = self._fetch(keys.world_truth(wid), Truth, tries=1)

@@ -9,6 +9,10 @@ import numpy as np
 
 SCHEMA_VERSION = 1
 
+#: `WorldSpec.program` of a world driven by an outside controller (`sme world --external`, a
+#: Gymnasium `BusEnv`): agents do not attach to it
+EXTERNAL_PROGRAM = "external"
+
 
 class EventKind(StrEnum):
     """The `kind` of an AgentEvent (one token on the wire; see protocol/README.md)."""

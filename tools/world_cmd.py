@@ -10,7 +10,7 @@ import sys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.params import ParamError, assignments, table_text
 from sensorimotor.worlds.node import WorldNode
-from sensorimotor.worlds.registry import WORLDS, make_world, world_kind
+from sensorimotor.worlds.registry import GYM_PREFIX, WORLDS, make_world, world_kind
 
 log = logging.getLogger("sme.world")
 
@@ -21,11 +21,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="attach a world simulator",
         description="Serve a world on the bus in lockstep: publish observation k, wait for the "
         "agent's action k (resend after --resend seconds, then keep waiting). The agent "
-        "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ". "
+        "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ", and gym:ENV_ID for any "
+        "Gymnasium environment with discrete actions (its keyword arguments as --param k=v). "
         "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.",
     )
-    p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)))
-    p.add_argument("--id", default=None, help="world id (default: the world name)")
+    p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)) + ", or gym:ENV_ID")
+    p.add_argument("--id", default=None, help="world id (default: the world name; for gym:ENV_ID, ENV_ID)")
     p.add_argument(
         "--param",
         action="append",
@@ -39,6 +40,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="print the world's parameters (name, type, default, doc) and exit; without NAME, every world's",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the world's random generator")
+    p.add_argument(
+        "--external",
+        action="store_true",
+        help="leave the world to an outside controller (a Gymnasium BusEnv, see the README): the spec "
+        "says program=external and agents on the bus do not attach to it",
+    )
     p.add_argument(
         "--resend",
         type=float,
@@ -61,6 +68,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def list_params(name: str | None) -> int:
     """Print the parameter table of world kind `name` (every kind when None); exit code."""
+    if name and name.startswith(GYM_PREFIX):
+        from sensorimotor.worlds.gym_world import gym_params_text
+
+        try:
+            print(gym_params_text(name))
+        except ParamError as e:
+            print(f"sme world: {e}", file=sys.stderr)
+            return 2
+        return 0
     try:
         names = [name] if name else sorted(WORLDS)
         tables = [table_text(world_kind(n).params_type(), f"{n}: {world_kind(n).summary}") for n in names]
@@ -100,12 +116,13 @@ def main_args(args: argparse.Namespace) -> int:
         node = WorldNode(
             world,
             bus,
-            args.id or args.name,
+            args.id or world.world_id,
             resend=args.resend,
             max_steps=args.steps,
             seconds=args.seconds,
             measure=args.stats_json is not None,
             warmup=args.warmup,
+            external=args.external,
         )
         node.install_signal_handlers()
         stats = node.run()

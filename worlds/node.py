@@ -23,6 +23,7 @@ from sensorimotor.protocol import codec, images, keys
 from sensorimotor.protocol.bus import Bus, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import (
+    EXTERNAL_PROGRAM,
     Action,
     Control,
     Observation,
@@ -131,6 +132,10 @@ class WorldNode:
     image_every : int, default=10
         Publish a camera frame every this many steps, for worlds that override `World.frame`
         (0: never).
+    external : bool, default=False
+        Leave the world to an outside controller (a Gymnasium `BusEnv`): the spec says
+        ``program: external`` (the world's own hint moves to ``params["program_hint"]``) and agents
+        do not attach.
 
     Examples
     --------
@@ -153,6 +158,7 @@ class WorldNode:
         measure: bool = False,
         warmup: int = 0,
         image_every: int = 10,
+        external: bool = False,
     ) -> None:
         self.world = world
         self.bus = bus
@@ -170,6 +176,9 @@ class WorldNode:
         self._controls: list[Control] = []
         self._ctl_lock = threading.Lock()
         self._spec = replace(world.spec(), world_id=self.world_id, session=self.session)
+        if external:
+            hint = {**self._spec.params, "program_hint": self._spec.program}
+            self._spec = replace(self._spec, program=EXTERNAL_PROGRAM, params=hint)
         self._truth_bytes: bytes | None = None
         self._refresh_truth()
 

@@ -1,7 +1,9 @@
 """World kinds by name, so that `sme world NAME` and the demo can build them, and `--list-params`,
 `sme perturb --list` and the README can show each kind's declared parameters and perturbations.
 
-World modules are imported lazily (PyBullet loads only for the worlds that need it)."""
+World modules are imported lazily (PyBullet loads only for the worlds that need it). A name
+``gym:ENV_ID`` is any Gymnasium environment with discrete actions (`worlds.gym_world`): its
+parameters are the world's own (`GymWorldParams`) and the environment's keyword arguments."""
 
 from __future__ import annotations
 
@@ -59,8 +61,15 @@ WORLDS: dict[str, WorldKind] = {
 }
 
 
+GYM_PREFIX = "gym:"
+GYM_KIND = WorldKind("gym_world", "GymWorld", "GymWorldParams", "any Gymnasium environment with discrete actions")
+
+
 def world_kind(name: str) -> WorldKind:
-    """The registry entry of world kind `name`; a ParamError naming the known kinds otherwise."""
+    """The registry entry of world kind `name` (`GYM_KIND` for ``gym:ENV_ID``); a ParamError naming
+    the known kinds otherwise."""
+    if name.startswith(GYM_PREFIX):
+        return GYM_KIND
     try:
         return WORLDS[name]
     except KeyError:
@@ -88,9 +97,9 @@ def make_world(name: str, world_id: str | None = None, seed: int = 0, params: Ma
     Parameters
     ----------
     name : str
-        A world kind of `WORLDS` (``gridworld``, ``retina``, ``vergence``...).
+        A world kind of `WORLDS` (``gridworld``, ``retina``, ``vergence``...) or ``gym:ENV_ID``.
     world_id : str or None, default=None
-        The world's id on the bus (default: `name`).
+        The world's id on the bus (default: `name`; for ``gym:ENV_ID``, ENV_ID made a valid id).
     seed : int, default=0
         Seeds the world's random generator.
     params : mapping or None, default=None
@@ -111,6 +120,10 @@ def make_world(name: str, world_id: str | None = None, seed: int = 0, params: Ma
     >>> w.spec().n_starts
     25
     """
+    if name.startswith(GYM_PREFIX):
+        from sensorimotor.worlds.gym_world import make_gym_world
+
+        return make_gym_world(name, world_id, seed, params)
     kind = world_kind(name)
     prm = parse(kind.params_type(), params or {}, name=name)
     return kind.world_class()(world_id or name, seed, prm)

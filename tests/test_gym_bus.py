@@ -1,0 +1,76 @@
+"""A live world process driven from a plain Gymnasium loop over loopback Zenoh (`BusEnv`), with an
+agent on the same bus that leaves the world alone because it was started with `--external`."""
+
+from __future__ import annotations
+
+import pytest
+
+from sensorimotor.worlds.gym_bus import BusEnv
+from tests.conftest import Lines, agent_status, wait_for, world_link
+
+pytestmark = pytest.mark.integration
+
+
+def test_a_plain_gymnasium_loop_steps_a_live_world_while_the_agent_stays_away(procs, endpoint):
+    agent = procs.start("agent", "--listen", endpoint)
+    assert wait_for(lambda: agent_status(endpoint) is not None, 60)
+    world = procs.start("world", "gridworld", "--id", "g5", "--param", "size=5", "--external", "--connect", endpoint)
+    log = Lines(agent.stderr)
+    env = BusEnv("g5", connect=endpoint, timeout=30)
+    try:
+        assert env.world_spec.program == "external" and env.world_spec.params["program_hint"] == "gridworld"
+        assert env.observation_space.n == 25 and env.action_space.n == 4
+        # start state 7 is the cell (x=2, y=1), just below the goal (2, 2): start states go row by row
+        obs, info = env.reset(options={"start": 7})
+        assert info["t"] == 0 and info["start"] == 7 and obs in env.observation_space
+        obs, reward, terminated, truncated, info = env.step(0)  # up, onto the goal
+        assert (reward, terminated, truncated) == (1.0, True, False)
+        steps, episodes, rewards = 0, 0, 0.0
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        while steps < 200:
+            obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+            assert obs in env.observation_space
+            steps, rewards = steps + 1, rewards + reward
+            if terminated or truncated:
+                episodes += 1
+                env.reset()
+        assert episodes >= 2 and rewards >= 1.0, (episodes, rewards)
+        assert wait_for(lambda: log.has("driven by an outside controller"), 10), log.lines
+        st = agent_status(endpoint)
+        assert st is not None and not [ln for ln in st.links if ln.world_id == "g5"]
+    finally:
+        env.close()
+    assert world.poll() is None  # the world waits for its next controller
+
+
+def test_a_world_an_agent_may_answer_is_refused(procs, endpoint):
+    procs.start("world", "gridworld", "--id", "g6", "--param", "size=3", "--connect", endpoint)
+    with pytest.raises(RuntimeError, match="sme world ... --external"):
+        BusEnv("g6", listen=endpoint, timeout=30)  # the router: the world connects to it
+    env = BusEnv("g6", listen=endpoint, timeout=30, force=True)
+    try:
+        obs, _ = env.reset(options={"start": 0})
+        assert obs in env.observation_space and env.step(1)[0] in env.observation_space
+    finally:
+        env.close()
+
+
+def test_sme_world_gym_frozenlake_is_learned_over_the_bus(procs, endpoint, monkeypatch):
+    """The done-when figure, live: `sme world gym:FrozenLake-v1 --param map_name=8x8 --param
+    is_slippery=false` with a stock agent; the reachable cells' embedding reaches Procrustes < 0.1."""
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")  # LSPI's small solves: threads only slow them
+    procs.start("agent", "--listen", endpoint, "-q", "--program-param", "generic.samples_per_iteration=400")
+    args = ["gym:FrozenLake-v1", "--param", "map_name=8x8", "--param", "is_slippery=false", "--connect", endpoint]
+    procs.start("world", *args, "-q")
+    seen: list[tuple[str, int, float]] = []
+
+    def learned() -> bool:
+        link = world_link(agent_status(endpoint), "FrozenLake-v1")
+        if link is None or not link.embedding_version:
+            return False
+        seen.append((link.program, link.embedding_version, link.last_procrustes_error))
+        return link.last_procrustes_error < 0.1
+
+    assert wait_for(learned, 90, every=0.5), seen[-5:]
+    assert seen[-1][0] == "generic", seen
