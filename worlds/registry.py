@@ -55,6 +55,9 @@ WORLDS: dict[str, WorldKind] = {
     "mountaincar": WorldKind(
         "mountaincar", "MountainCarWorld", "MountainCarWorldParams", "the visual mountain car (ch. 8)"
     ),
+    "rovingeye": WorldKind(
+        "roving_eye", "RovingEyeWorld", "RovingEyeParams", "a 128x128 eye over a bundled natural image (ch. 5.2)"
+    ),
     "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }
 
