@@ -5,7 +5,8 @@ Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and bar
 by the agent itself), `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
 1-D depth map, on the PyBullet robot and on the Middlebury stereo pair) and `mountaincar` (ch. 8:
 steps-to-goal curves of the staged program on three bodies, against true-state and random agents,
-and a baseline change while driving). Runs go to worker processes (spawned); results are written to
+and a baseline change while driving) and `rovingeye` (ch. 5.2: Table 5.1, the five ways of making
+traces, Fig 5.8 scree and Fig 5.11 embeddings). Runs go to worker processes (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
 
@@ -528,13 +529,25 @@ def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
     return {"results": res, "finals": finals, "ci95": ci, "welch_p": tests, "live": live, "markdown": "\n".join(lines)}
 
 
-CHAPTERS = {"gridworld": gridworld, "retina": retina, "vergence": vergence, "mountaincar": mountaincar}
+def rovingeye(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.rovingeye import chapter
+
+    return chapter(runs, quick, workers, out)
+
+
+CHAPTERS = {
+    "gridworld": gridworld,
+    "retina": retina,
+    "vergence": vergence,
+    "mountaincar": mountaincar,
+    "rovingeye": rovingeye,
+}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
-        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar)",
+        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, rovingeye)",
         description=__doc__,
     )
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")
