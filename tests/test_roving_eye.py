@@ -75,3 +75,34 @@ def test_table_5_1_ordering_shortened():
     for m in order:
         assert err[m] <= R.DISSERTATION_ERROR[m], (m, err[m])
     assert err["ballistic"] < 0.005
+
+
+def test_live_gain_change_detected_and_reembedded():
+    """The rovingeye program through the daemon's attach path: it learns its jumps, `gain 1.5`
+    makes every move longer, its own detector sees the drop, and the relearned map is published
+    with the error back below twice its pre-change value."""
+    from sensorimotor.agent.detectors import make_detector
+    from sensorimotor.agent.programs.registry import make_program
+    from sensorimotor.protocol.messages import Trigger
+    from sensorimotor.tools.inprocess import run_inprocess
+
+    at = 6000
+    w = RovingEyeWorld(seed=1, n_starts=20)
+    p = make_program(w.spec(), seed=1, embed_every=500)
+    assert p.name == "rovingeye"
+    run = run_inprocess(
+        w,
+        p,
+        12000,
+        detector=make_detector("cusum"),
+        perturb=lambda k: Control(w.world_id, "gain", {"gain": "1.5"}) if k == at else None,
+    )
+    embs = run.embeddings
+    pre = [e.procrustes_error for e in embs if e.step <= at][-1]
+    assert pre < 1e-3
+    drops = [e.step for e in run.events("drop_detected")]
+    assert drops and at < drops[0] <= at + 40 and all(d > at for d in drops)
+    relearned = [e for e in embs if e.trigger == Trigger.RELEARNED]
+    assert relearned and relearned[0].drop_step == drops[0]
+    assert embs[-1].step > relearned[0].step
+    assert embs[-1].procrustes_error < 2 * pre, (pre, [(e.step, e.procrustes_error) for e in embs])

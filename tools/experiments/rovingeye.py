@@ -212,7 +212,7 @@ def learn_ballistic(s: Setup, cfg: Config, seed: int, gain: float = 1.0) -> Sacc
         learner.noise_sd = exploration_noise(learner.R[i], cfg)
         a = learner.act(delta)
         end = s.points[i] + gain * a
-        learner.learn_one(delta, a, float(reward(np.linalg.norm(end - s.goal), cfg.reward_px)))
+        learner.learn_one(delta, a, float(reward(float(np.linalg.norm(end - s.goal)), cfg.reward_px)))
     return learner
 
 
@@ -327,7 +327,7 @@ def plot_fig_5_11(out: str, fig: dict) -> None:
     ax.invert_yaxis()
     ax.set_aspect("equal")
     ax.set(title="Embeddings of eye positions (Fig 5.11)", xlabel="u (standardised)", ylabel="v (standardised)")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper right")
     f.tight_layout()
     f.savefig(os.path.join(out, "rovingeye_fig5_11.png"), dpi=110)
     plt.close(f)
@@ -368,7 +368,7 @@ def chapter(runs: int, quick: bool, workers: int, out: str) -> dict:
         "|---" * (len(METHODS) + 1) + "|",
         "| score, ours | NA | " + " | ".join(f"{sc_ci[m][0]:.3f} ± {sc_ci[m][1]:.3f}" for m in METHODS[1:]) + " |",
         "| score, dissertation | NA | " + " | ".join(f"{DISSERTATION_SCORE[m]:.2f}" for m in METHODS[1:]) + " |",
-        "| Procrustes error, ours | " + " | ".join(f"{err_ci[m][0]:.4f} ± {err_ci[m][1]:.4f}" for m in METHODS) + " |",
+        "| Procrustes error, ours | " + " | ".join(f"{err_ci[m][0]:.3g} ± {err_ci[m][1]:.2g}" for m in METHODS) + " |",
         "| Procrustes error, dissertation | " + " | ".join(f"{DISSERTATION_ERROR[m]:.2f}" for m in METHODS) + " |",
         "| mean actions per trace | NA | "
         + " | ".join(f"{np.mean([r['mean_actions'][m] for r in res]):.1f}" for m in METHODS[1:])
