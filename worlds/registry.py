@@ -48,6 +48,12 @@ WORLDS: dict[str, WorldKind] = {
         "gridworld", "GridWorld", "BarrierGridWorldParams", "the gridworld with the S-shaped barrier of Fig 5.1b"
     ),
     "retina": WorldKind("retina", "RetinaWorld", "RetinaWorldParams", "foveated retina on a pan/tilt camera (ch. 4)"),
+    "retina-natural": WorldKind(
+        "natural_retina",
+        "NaturalRetinaWorld",
+        "NaturalRetinaParams",
+        "the ch. 4 retina over a natural picture (Table 4.1)",
+    ),
     "vergence": WorldKind("vergence", "VergenceWorld", "VergenceWorldParams", "depth from vergence (ch. 7)"),
     "stereo": WorldKind(
         "stereo_pair", "StereoPairWorld", "StereoPairParams", "vergence on the Middlebury motorcycle pair (ch. 7.2.2)"
