@@ -94,7 +94,7 @@ def test_live_gain_change_detected_and_reembedded():
         w,
         p,
         12000,
-        detector=make_detector("cusum"),
+        detector=make_detector("cusum", **p.detector_params),  # as the daemon builds it for this program
         perturb=lambda k: Control(w.world_id, "gain", {"gain": "1.5"}) if k == at else None,
     )
     embs = run.embeddings

@@ -53,6 +53,10 @@ class RovingEyeProgram(RetinaProgram):
 
     name = "rovingeye"
     Params = RovingEyeProgramParams
+    # Once the jumps are learned the reward barely varies, so the detector's reference sd is tiny and
+    # a 2-sigma wobble of exploration is no body change: only sustained drops of several sigma count
+    # (a gain change drops the reward to ~0, dozens of sigma: still detected within a few jumps).
+    detector_params = {"k": 2.0, "h": 20.0}
     INIT_SPREAD = 0.0
     ABSOLUTE = False
 
