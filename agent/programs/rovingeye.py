@@ -33,6 +33,9 @@ class RovingEyeProgramParams(RetinaProgramParams):
     """Hyperparameters of the roving-eye program (ch. 5.2)."""
 
     exploration: str = option("gaussian", "exploration of the jump learner", choices=("relearn", "gamma", "gaussian"))
+    noise_sd: float | None = option(
+        None, "not used: the noise follows each start's reward estimate (noise_* below)", min=0.0
+    )
     embed_every: int = option(500, "jumps between periodic embeddings", min=1)
     settle_min: int = option(500, "jumps after a drop before the reward may count as settled", min=0)
     settle_window: int = option(200, "jumps in the settled-reward window", min=1)
