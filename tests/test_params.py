@@ -263,6 +263,7 @@ def test_every_program_declares_params_and_builds_from_defaults(name):
         "mountaincar": "mountaincar",
         "echo": "bench",
         "generic": "gridworld",
+        "rovingeye": "rovingeye",
     }[name]
     with mw(
         world, None, 0, {"supersample": "1"} if world == "retina" else {"n_eval": "2"} if world == "mountaincar" else {}

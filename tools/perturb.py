@@ -21,6 +21,7 @@ KINDS = {
     "reverse": "retina: swap up/down motor commands (again to restore)",
     "noise": "retina: additive sensor noise, --param sd=0.05",
     "heal": "undo every perturbation",
+    "gain": "rovingeye: every move becomes --param gain=G times longer (default 1.5; a different eye muscle)",
     "morph": "mountain car/vergence: change the body, e.g. --baseline 1.4 or --vertical (same as --param "
     "baseline=1.4, --param vertical=true)",
 }

@@ -5,7 +5,8 @@ Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and bar
 by the agent itself), `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
 1-D depth map, on the PyBullet robot and on the Middlebury stereo pair) and `mountaincar` (ch. 8:
 steps-to-goal curves of the staged program on three bodies, against true-state and random agents,
-and a baseline change while driving). Runs go to worker processes (spawned); results are written to
+and a baseline change while driving) and `rovingeye` (ch. 5.2: Table 5.1, the five ways of making
+traces, Fig 5.8 scree and Fig 5.11 embeddings). Runs go to worker processes (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
 
@@ -528,13 +529,25 @@ def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
     return {"results": res, "finals": finals, "ci95": ci, "welch_p": tests, "live": live, "markdown": "\n".join(lines)}
 
 
-CHAPTERS = {"gridworld": gridworld, "retina": retina, "vergence": vergence, "mountaincar": mountaincar}
+def rovingeye(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.rovingeye import chapter
+
+    return chapter(runs, quick, workers, out)
+
+
+CHAPTERS = {
+    "gridworld": gridworld,
+    "retina": retina,
+    "vergence": vergence,
+    "mountaincar": mountaincar,
+    "rovingeye": rovingeye,
+}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
-        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar)",
+        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, rovingeye)",
         description=__doc__,
     )
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")
@@ -542,6 +555,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help="shortened runs, for a first look (about a minute)")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes")
     p.add_argument("--out", default="out", help="output folder (default ./out)")
+    p.add_argument(
+        "--scene",
+        choices=("wall", "natural"),
+        default="wall",
+        help="retina only: the dark wall with a spot (ch. 4, default) or a natural picture (Table 4.1)",
+    )
     p.set_defaults(func=main_args)
 
 
@@ -550,15 +569,25 @@ def main_args(args: argparse.Namespace) -> int:
         print("sme reproduce: --runs and --workers must be >= 1", file=sys.stderr)
         return 2
     require("matplotlib")  # the plots need it: say so now, not after the runs
-    out = os.path.join(args.out, args.chapter)
+    scene = getattr(args, "scene", "wall")
+    if scene != "wall" and args.chapter != "retina":
+        print("sme reproduce: --scene applies to the retina chapter only", file=sys.stderr)
+        return 2
+    chapter_fn = CHAPTERS[args.chapter]
+    name = args.chapter
+    if scene == "natural":
+        from sensorimotor.tools.experiments.retina_natural import chapter as chapter_fn
+
+        name = "retina-natural"
+    out = os.path.join(args.out, name)
     os.makedirs(out, exist_ok=True)
     t0 = time.time()
     print(
-        f"sme reproduce {args.chapter}: {args.runs} runs{' (quick)' if args.quick else ''}, "
+        f"sme reproduce {name}: {args.runs} runs{' (quick)' if args.quick else ''}, "
         f"{args.workers} workers, writing {out}/ ...",
         flush=True,
     )
-    res = CHAPTERS[args.chapter](args.runs, args.quick, args.workers, out)
+    res = chapter_fn(args.runs, args.quick, args.workers, out)
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(res, f, default=float)
     with open(os.path.join(out, "table.md"), "w") as f:

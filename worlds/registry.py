@@ -50,12 +50,21 @@ WORLDS: dict[str, WorldKind] = {
         "gridworld", "GridWorld", "BarrierGridWorldParams", "the gridworld with the S-shaped barrier of Fig 5.1b"
     ),
     "retina": WorldKind("retina", "RetinaWorld", "RetinaWorldParams", "foveated retina on a pan/tilt camera (ch. 4)"),
+    "retina-natural": WorldKind(
+        "natural_retina",
+        "NaturalRetinaWorld",
+        "NaturalRetinaParams",
+        "the ch. 4 retina over a natural picture (Table 4.1)",
+    ),
     "vergence": WorldKind("vergence", "VergenceWorld", "VergenceWorldParams", "depth from vergence (ch. 7)"),
     "stereo": WorldKind(
         "stereo_pair", "StereoPairWorld", "StereoPairParams", "vergence on the Middlebury motorcycle pair (ch. 7.2.2)"
     ),
     "mountaincar": WorldKind(
         "mountaincar", "MountainCarWorld", "MountainCarWorldParams", "the visual mountain car (ch. 8)"
+    ),
+    "rovingeye": WorldKind(
+        "roving_eye", "RovingEyeWorld", "RovingEyeParams", "a 128x128 eye over a bundled natural image (ch. 5.2)"
     ),
     "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }

@@ -49,6 +49,12 @@ PROGRAMS: dict[str, ProgramKind] = {
         "RetinaProgramParams",
         "saccade learning, ballistic embedding of field positions (ch. 4)",
     ),
+    "rovingeye": ProgramKind(
+        "rovingeye",
+        "RovingEyeProgram",
+        "RovingEyeProgramParams",
+        "ballistic jumps to the perceptual goal, start states embedded (ch. 5.2)",
+    ),
     "mountaincar": ProgramKind(
         "mountaincar",
         "MountainCarProgram",

@@ -57,14 +57,14 @@ class RetinaProgram(Program):
         self, spec: WorldSpec, seed: int = 0, params: RetinaProgramParams | None = None, **overrides: Any
     ) -> None:
         super().__init__(spec, seed)
-        self.params = prm = parse(RetinaProgramParams, overrides, name=self.name, base=params)
+        self.params = prm = parse(self.Params, overrides, name=self.name, base=params)
         rule, exploration, alpha, noise_sd = prm.rule, prm.exploration, prm.alpha, prm.noise_sd
         embed_every, settle_min, settle_window = prm.embed_every, prm.settle_min, prm.settle_window
         settle_gain, min_experience = prm.settle_gain, prm.min_experience
         a = spec.action_space
         if a.discrete or a.dims != 2:
             raise SpecMismatch(f"retina program needs a 2-D box action space, world {spec.world_id} has {a}")
-        self.n = int(np.prod(spec.sensor("fields").shape))
+        self.n = self.input_size(spec)
         self.learner = SaccadeLearner(
             self.n,
             np.array(a.low),
@@ -73,6 +73,7 @@ class RetinaProgram(Program):
             noise_sd=noise_sd,
             rule=rule,
             exploration=exploration,
+            init_spread=self.INIT_SPREAD,
             seed=seed,
         )
         self.embed_every = embed_every
@@ -84,6 +85,15 @@ class RetinaProgram(Program):
         self._action: np.ndarray | None = None
         self._rewards: list[float] = []
         self._drop: tuple[int, int, float] | None = None  # (step, episode, reward before) of the drop
+
+    #: initial preferences: uniform over the action box scaled by this (see `SaccadeLearner`)
+    INIT_SPREAD = 1.0
+    #: the embedding is in the truth's units and frame (so E_geometry applies)
+    ABSOLUTE = True
+
+    def input_size(self, spec: WorldSpec) -> int:
+        """Number of learner inputs (fields): the size of the "fields" sensor."""
+        return int(np.prod(spec.sensor("fields").shape))
 
     def _fields(self, obs: Observation) -> np.ndarray:
         f = obs.tensors["fields"].reshape(-1)
@@ -112,7 +122,7 @@ class RetinaProgram(Program):
                 "reward_mean": float(np.mean(recent)) if recent else 0.0,
                 "resets": float(self.learner.resets),
             },
-            absolute=True,
+            absolute=self.ABSOLUTE,
             drop_step=drop_step,
         )
 
@@ -139,6 +149,11 @@ class RetinaProgram(Program):
             self._pre = f
             self._action = self.learner.act(f)
             return Decision(tuple(float(v) for v in self._action))
+        self._finish(obs)
+        return Decision(reset=True)
+
+    def _finish(self, obs: Observation) -> None:
+        """The end of an episode: learn from the saccade's reward, embed periodically and once relearned."""
         if self._pre is not None and self._action is not None and obs.t > 0:  # set together in the t == 0 branch
             self.learner.learn_one(self._pre, self._action, obs.reward)
             self.episodes += 1
@@ -161,7 +176,6 @@ class RetinaProgram(Program):
                 self.learner.end_relearning()
                 self._drop = None
         self._pre = None
-        return Decision(reset=True)
 
     def performance(self, obs: Observation) -> float | None:
         """log(1 + post-saccade activation): the activation is multiplicative and heavy-tailed
