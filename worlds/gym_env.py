@@ -35,6 +35,7 @@ GYM_ENVS: dict[str, tuple[str, dict[str, Any]]] = {
     "sme/Retina-v0": ("retina", {}),
     "sme/Vergence-v0": ("vergence", {}),
     "sme/MountainCar-v0": ("mountaincar", {}),
+    "sme/RovingEye-v0": ("rovingeye", {}),
 }
 
 
