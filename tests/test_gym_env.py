@@ -23,7 +23,9 @@ SMALL = {
 
 
 def test_every_sme_world_is_registered_on_import():
-    assert {"sme/Gridworld-v0", "sme/Retina-v0", "sme/Vergence-v0", "sme/MountainCar-v0", "sme/RovingEye-v0"} <= set(GYM_ENVS)
+    assert {"sme/Gridworld-v0", "sme/Retina-v0", "sme/Vergence-v0", "sme/MountainCar-v0", "sme/RovingEye-v0"} <= set(
+        GYM_ENVS
+    )
     for env_id in GYM_ENVS:
         assert env_id in gym.envs.registry
 
