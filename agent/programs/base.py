@@ -64,6 +64,7 @@ class EmbeddingOutput:
     absolute: bool = False  # coordinates are in the truth's own units (E_geometry is meaningful)
     iteration: int = 0
     drop_step: int | None = None
+    labels: tuple[int, ...] = ()  # trigger policy_map: cluster of each row
 
 
 @dataclass(frozen=True)

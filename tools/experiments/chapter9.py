@@ -234,3 +234,91 @@ def options_job(seed: int, budget: int, n_options: int = 4, size: int = 15, leve
         curve, _ = train_options_agent(table, opts, seed, budget, level)
         out[name] = {"steps": curve.steps, "mean_steps": curve.mean_steps, "steps_to_level": curve.steps_to_level}
     return out
+
+
+# --- policy maps (9.6, Fig 9.2) -----------------------------------------------------------------
+
+OUTCOMES = ("failure", "direct", "rocking")
+
+
+def train_mountaincar(seed: int, train_steps: int, tiles: int = 10, n_tilings: int = 8) -> Any:
+    """Sarsa(lambda) with tile coding on the true (x, v) for `train_steps` car steps (as ch. 8's
+    true-state agent): the trained policy whose behaviour a policy map shows."""
+    from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+    from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, random_state
+    from sensorimotor.worlds.mountaincar_dynamics import step as car_step
+
+    prm = MountainCarParams()
+    rng = np.random.default_rng(seed)
+    coder = TileCoder(
+        np.array([prm.x_min, -prm.v_max]), np.array([prm.x_max, prm.v_max]), tiles=tiles, n_tilings=n_tilings
+    )
+    agent = SarsaLambda(coder, 3, alpha=0.3, gamma=0.99, lam=0.9, epsilon=0.0, seed=seed)
+    n = 0
+    while n < train_steps:
+        x, v = random_state(rng, prm)
+        s = np.array([x, v])
+        agent.begin_episode()
+        a = agent.act(s)
+        for _ in range(1000):
+            x, v, done = car_step(x, v, a - 1, prm)
+            n += 1
+            s2 = np.array([x, v])
+            if done:
+                agent.learn_one(s, a, -1.0, s2, None)
+                break
+            a2 = agent.act(s2)
+            agent.learn_one(s, a, -1.0, s2, a2)
+            s, a = s2, a2
+    return agent
+
+
+def mountaincar_traces(agent: Any, n: int, seed: int, cap: int = 300) -> tuple[list[list[int]], list[str]]:
+    """Greedy traces of `agent` from `n` random (x, v) starts and each start's true outcome:
+    ``failure`` (no goal within `cap` car steps), ``direct`` (goal without the car ever moving
+    backwards after its start) or ``rocking`` (goal after at least one backward swing)."""
+    from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, random_state
+    from sensorimotor.worlds.mountaincar_dynamics import step as car_step
+
+    prm = MountainCarParams()
+    rng = np.random.default_rng(seed)
+    traces, outcomes = [], []
+    for _ in range(n):
+        x, v = random_state(rng, prm)
+        tr: list[int] = []
+        backward, done = False, False
+        while not done and len(tr) < cap:
+            a = agent.greedy(np.array([x, v]))
+            tr.append(a)
+            x, v, done = car_step(x, v, a - 1, prm)
+            backward |= v < 0 and len(tr) > 1
+        traces.append(tr)
+        outcomes.append("failure" if not done else ("rocking" if backward else "direct"))
+    return traces, outcomes
+
+
+def policy_map_job(seed: int, train_steps: int, n_starts: int, n_clusters: int | None = 3) -> dict:
+    """Fig 9.2 on one seed: train, trace from `n_starts` random starts, map, and score the clusters
+    against the true outcomes (each cluster's majority outcome and its purity)."""
+    from sensorimotor.agent.embedding.policy_map import policy_map
+
+    agent = train_mountaincar(seed, train_steps)
+    traces, outcomes = mountaincar_traces(agent, n_starts, seed + 1)
+    pm = policy_map(traces, n_clusters=n_clusters, seed=seed)
+    clusters = []
+    out = np.array(outcomes)
+    for c in range(pm.n_clusters):
+        members = out[pm.labels == c]
+        counts = {o: int((members == o).sum()) for o in OUTCOMES}
+        major = max(counts, key=lambda o: counts[o])
+        clusters.append({"cluster": c, "size": int(members.size), "majority": major,
+                         "purity": counts[major] / max(1, members.size), "outcomes": counts})
+    return {
+        "seed": seed,
+        "coordinates": pm.coordinates.tolist(),
+        "labels": pm.labels.tolist(),
+        "outcomes": outcomes,
+        "clusters": clusters,
+        "silhouette": pm.silhouette,
+        "mean_length": float(np.mean([len(t) for t in traces])),
+    }
