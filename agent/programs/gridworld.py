@@ -35,6 +35,7 @@ class GridworldProgramParams:
     dims: int = option(2, "embedding dimensions (classical MDS)", min=1)
     policy: str = option("lspi", "policy whose traces are embedded", choices=("lspi", "random"))
     substitution_cost: int = option(2, "edit-distance cost of a substitution (2: indel distance)", min=1)
+    policy_map: int = option(0, "clusters of a policy map emitted after each embedding (0: none; ch. 9.6)", min=0)
 
 
 class GridworldProgram(Program):
@@ -130,6 +131,8 @@ class GridworldProgram(Program):
                 },
             )
         )
+        if self.params.policy_map and self.policy == "lspi":
+            self.emit_policy_map(traces, tuple(range(len(traces))), step, self.params.policy_map)
 
     # the program -------------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:

@@ -170,8 +170,8 @@ def train_options_agent(
     n_eval: int = 40,
     max_episode: int = 300,
 ) -> tuple[OptionCurve, Any]:
-    """SMDP Q-learning with `options` (none: primitives only) from random starts; training steps
-    count primitive world steps. Stops at the budget or once greedy steps to goal <= `level`."""
+    """SMDP Q-learning with `options` (none: primitives only) from random starts, each step of an
+    option also updating its primitive action (intra-option); training steps count primitive world steps. Stops at the budget or once greedy steps to goal <= `level`."""
     from sensorimotor.agent.learners.smdp_q import OptionQLearner
 
     n = table.next.shape[0]
@@ -188,10 +188,12 @@ def train_options_agent(
             c = agent.choose(s)
             s0, R, k = s, 0.0, 0
             for a in agent.actions_of(c):
-                s = int(table.next[s, a])
+                prev, s = s, int(table.next[s, a])
                 k += 1
                 t += 1
                 ep += 1
+                if c >= agent.n_actions:  # intra-option learning: each step also teaches its primitive
+                    agent.update(prev, a, float(s == table.goal), 1, s, s == table.goal)
                 if s == table.goal:
                     R += agent.gamma ** (k - 1)
                     break
@@ -322,3 +324,80 @@ def policy_map_job(seed: int, train_steps: int, n_starts: int, n_clusters: int |
         "silhouette": pm.silhouette,
         "mean_length": float(np.mean([len(t) for t in traces])),
     }
+
+
+# --- variations (9.5) -----------------------------------------------------------------------------
+
+
+def isomap_coordinates(D: np.ndarray, dims: int = 2, n_neighbors: int = 8) -> np.ndarray:
+    """Isomap (scikit-learn) over precomputed trace distances: a non-linear embedding in place of MDS."""
+    from sklearn.manifold import Isomap
+
+    return Isomap(n_neighbors=n_neighbors, n_components=dims, metric="precomputed").fit_transform(D)
+
+
+def isomap_job(seed: int, barrier: bool) -> dict:
+    """Plain (classical MDS) against Isomap on the same LSPI traces of the (barrier) gridworld."""
+    world = GridWorld(seed=seed, barrier=barrier)
+    lspi = train_lspi_gridworld(world, seed)
+    traces = [greedy_trace(world, lspi, i) for i in range(len(world.cells))]
+    D = trace_distances(traces, kind="edit", substitution_cost=2)
+    truth = world.truth().tensors["positions"]
+    return {
+        "seed": seed,
+        "barrier": barrier,
+        "mds": procrustes_error(truth, classical_mds(D, 2).coordinates),
+        "isomap": procrustes_error(truth, isomap_coordinates(D)),
+    }
+
+
+def far_error(truth: np.ndarray, embedding: np.ndarray, far: np.ndarray) -> float:
+    """Mean |aligned - truth| over the `far` rows after a least-squares affine fit of the 1-D
+    embedding onto the 1-D truth over all rows (in the truth's units)."""
+    t, e = np.asarray(truth, dtype=np.float64).reshape(-1), np.asarray(embedding, dtype=np.float64).reshape(-1)
+    A = np.c_[e, np.ones_like(e)]
+    coef, *_ = np.linalg.lstsq(A, t, rcond=None)
+    return float(np.abs(A @ coef - t)[far].mean())
+
+
+def substep_offset(d: np.ndarray, g: int) -> float:
+    """Where between vergence steps the minimum of d lies, from the states seen around the end of
+    the trace: the vertex of the parabola through d(g-1), d(g), d(g+1), in steps (|offset| <= 0.5)."""
+    if g < 1 or g + 1 >= d.size:
+        return 0.0
+    a, b, c = float(d[g - 1]), float(d[g]), float(d[g + 1])
+    den = a - 2 * b + c
+    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den > 0 else 0.0
+
+
+def state_aided_job(n_starts: int = 20) -> dict:
+    """Vergence traces of ch. 7 (the perfect policy: converge to the perceptual goal) against the
+    same traces aided by state (9.5). Plain: indel edit distance of the actions, i.e. differences of
+    trace lengths, which alias at far depths where several starts share a goal step. State-aided:
+    the trace length refined by the foveal differences d (Eq 7.2) seen at the trace's end - one step
+    before, at, and one probe step past the goal - as the parabola's vertex (`substep_offset`)."""
+    from sensorimotor.worlds.vergence import VergenceWorld
+
+    w = VergenceWorld(seed=0, n_starts=n_starts)
+    try:
+        goals, offsets = [], []
+        for st in range(w.spec().n_starts):
+            w.reset(start=st)
+            d = w.differences(range(max(w.goal - 1, 0), w.goal + 2))
+            goals.append(w.goal)
+            offsets.append(substep_offset(np.r_[np.zeros(max(w.goal - 1, 0)), d], w.goal))
+        truth = w.truth().tensors["positions"][:, 0]
+    finally:
+        w.close()
+    D_plain = trace_distances([[0] * g for g in goals], kind="edit", substitution_cost=2)
+    refined = np.asarray(goals, dtype=np.float64) + np.asarray(offsets)
+    D_aided = np.abs(refined[:, None] - refined[None, :])
+    far = np.argsort(-np.asarray(truth))[len(truth) // 2 :]  # the smaller angles: the farther half
+    out: dict[str, Any] = {
+        "n_starts": n_starts,
+        "aliased_far_starts": int(len(far) - len({goals[i] for i in far})),
+    }
+    for name, D in (("plain", D_plain), ("state_aided", D_aided)):
+        X = classical_mds(D, 1).coordinates
+        out[name] = {"procrustes": procrustes_error(truth, X), "far_error_rad": far_error(truth, X, far)}
+    return out
