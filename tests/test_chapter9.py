@@ -140,3 +140,15 @@ def test_policy_map_of_the_mountain_car_separates_failures_direct_climbs_and_roc
         if n / sum(m.values()) >= 0.6:
             majority.setdefault(o, []).append(c)
     assert set(majority) == set(C9.OUTCOMES), majority  # a mostly-failing, a direct and a rocking cluster
+
+
+def test_mountaincar_thrust_noise_defaults_to_the_deterministic_dynamics():
+    from sensorimotor.worlds.mountaincar import MountainCarWorldParams
+    from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, step
+
+    assert MountainCarWorldParams().thrust_noise == 0.0
+    prm = MountainCarParams()
+    assert step(-0.5, 0.01, 1, prm) == step(-0.5, 0.01, 1, prm, 0.0)
+    x1, v1, _ = step(-0.5, 0.01, 1, prm, 0.5)
+    x0, v0, _ = step(-0.5, 0.01, 1, prm)
+    assert v1 - v0 == pytest.approx(0.5 * prm.p)  # noise is extra thrust in units of the push
