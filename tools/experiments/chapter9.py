@@ -475,7 +475,7 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
     }
     saving = 1.0 - float(np.mean(to_level["discovered"])) / float(np.mean(to_level["none"]))
     # policy maps: clusters per seed, and which true outcomes have a cluster of their own
-    covered = [sorted({c["majority"] for c in m["clusters"] if c["purity"] >= 0.6 and c["size"] >= 10}) for m in maps]
+    covered = [sorted({c["majority"] for c in m["clusters"] if c["purity"] >= 0.6 and c["size"] >= 5}) for m in maps]
     prob_ci = {k: _ci95([r[k] for r in prob]) for k in ("plain", "mode", "mean", "mean_debiased")}
     samples = {k: _ci95([r[k] for r in prob]) for k in ("samples_mode", "samples_mean")}
     iso_ci = {(b, k): _ci95([r[k] for r in iso if r["barrier"] == b]) for b in (False, True) for k in ("mds", "isomap")}
