@@ -152,3 +152,34 @@ def test_mountaincar_thrust_noise_defaults_to_the_deterministic_dynamics():
     x1, v1, _ = step(-0.5, 0.01, 1, prm, 0.5)
     x0, v0, _ = step(-0.5, 0.01, 1, prm)
     assert v1 - v0 == pytest.approx(0.5 * prm.p)  # noise is extra thrust in units of the push
+
+
+def test_view_draws_a_policy_map_coloured_by_cluster():
+    from sensorimotor.protocol import keys
+    from sensorimotor.tools.view import PALETTE, RerunLogger
+
+    class FakeRR:
+        def __init__(self):
+            self.logged = []
+
+        def set_time(self, *a, **k):
+            pass
+
+        def Points2D(self, pts, colors=None, radii=None):  # noqa: N802 (rerun's name)
+            return {"pts": pts, "colors": colors}
+
+        def Scalars(self, v):  # noqa: N802
+            return v
+
+        def TextLog(self, text, level=None):  # noqa: N802
+            return text
+
+        def log(self, path, what):
+            self.logged.append((path, what))
+
+    rr = FakeRR()
+    e = Embedding("a0", "w", 3, Trigger.POLICY_MAP, (0, 1, 2), np.eye(3)[:, :2], (1.0,), labels=(0, 2, 2))
+    RerunLogger(rr).handle(keys.agent_embedding("a0", "w"), codec.encode(e), 1.0)
+    (path, pts) = next((p, w) for p, w in rr.logged if p.endswith("policy_map"))
+    assert path == "w/policy_map"
+    assert (pts["colors"] == PALETTE[[0, 2, 2]]).all()
