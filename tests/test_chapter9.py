@@ -183,3 +183,15 @@ def test_view_draws_a_policy_map_coloured_by_cluster():
     (path, pts) = next((p, w) for p, w in rr.logged if p.endswith("policy_map"))
     assert path == "w/policy_map"
     assert (pts["colors"] == PALETTE[[0, 2, 2]]).all()
+
+
+def test_gridworld_program_samples_until_settled_in_a_slippery_world():
+    w = GridWorld(seed=0, size=7, slip=0.2)
+    p = GridworldProgram(w.spec(), seed=0, estimator="mode", samples_per_iteration=1500, max_samples=24)
+    run = run_inprocess(w, p, 30_000, stop_when=lambda r: len(r.embeddings) >= 3)
+    last = run.embeddings[-1]
+    assert last.procrustes_error is not None and last.procrustes_error < 0.05, run.errors
+    assert 2 < last.metrics["samples_per_start"] <= 24  # the agent chose how many samples
+    restored = GridworldProgram(w.spec(), seed=0, estimator="mode", samples_per_iteration=1500, max_samples=24)
+    restored.restore(p.state())  # the sampling state survives a checkpoint
+    assert restored.params.estimator == "mode"

@@ -75,6 +75,26 @@ def mean_pair_distances(
     return D
 
 
+ESTIMATORS = ("mode", "mean")
+
+
+def estimate_distances(
+    samples: Sequence[Sequence[Sequence[int]]], estimator: str, substitution_cost: int = 2
+) -> np.ndarray:
+    """Distances between start states from their sampled traces, by `estimator` ("mode" or "mean")."""
+    if estimator == "mode":
+        return mode_distances(samples, substitution_cost)
+    if estimator == "mean":
+        return mean_pair_distances(samples, substitution_cost)
+    raise ValueError(f"estimator must be one of {ESTIMATORS}, not {estimator!r}")
+
+
+def relative_change(D_new: np.ndarray, D_old: np.ndarray) -> float:
+    """||D_new - D_old|| / ||D_new|| (Frobenius; 0 when both are zero): how much an estimate moved."""
+    norm = float(np.linalg.norm(D_new))
+    return float(np.linalg.norm(D_new - D_old)) / norm if norm > 0 else 0.0
+
+
 @dataclass(frozen=True)
 class SettledDistances:
     """What `sample_until_settled` ends with: the distance estimate, the samples per start, the
@@ -135,8 +155,7 @@ def sample_until_settled(
             samples[i].extend(tuple(int(a) for a in sample(i)) for _ in range(batch))
         D = estimator(samples)
         if D_old is not None:
-            norm = float(np.linalg.norm(D))
-            change = float(np.linalg.norm(D - D_old)) / norm if norm > 0 else 0.0
+            change = relative_change(D, D_old)
             changes.append(change)
             calm = calm + 1 if change < tol else 0
             if calm >= patience:
