@@ -354,6 +354,7 @@ class WorldLink:
                 {**item.metrics, **scores},
                 item.iteration,
                 item.drop_step,
+                item.labels,
             )
             log.info(
                 "world %s: embedding v%d (%s) n=%d error=%s",

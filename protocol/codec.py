@@ -194,6 +194,7 @@ def _enc_emb(x: m.Embedding) -> pb.Embedding:
         step=x.step,
         timestamp=x.timestamp,
         iteration=x.iteration,
+        labels=[int(v) for v in x.labels],
     )
     if x.drop_step is not None:
         p.drop_step = x.drop_step
@@ -351,6 +352,8 @@ def _dec_truth(p: pb.Truth) -> m.Truth:
 
 def _dec_emb(p: pb.Embedding) -> m.Embedding:
     coords = _tensor_from_pb(p.coordinates, "Embedding")
+    if p.labels and len(p.labels) != (coords.shape[0] if coords.ndim else 0):
+        raise errors.ShapeMismatch(f"Embedding: {len(p.labels)} labels for {coords.shape[0]} rows")
     return m.Embedding(
         agent_id=p.agent_id,
         world_id=p.world_id,
@@ -365,6 +368,7 @@ def _dec_emb(p: pb.Embedding) -> m.Embedding:
         metrics=dict(p.metrics),
         iteration=p.iteration,
         drop_step=p.drop_step if p.HasField("drop_step") else None,
+        labels=tuple(p.labels),
     )
 
 

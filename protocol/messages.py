@@ -39,6 +39,7 @@ class Trigger(StrEnum):
     POLICY_ITERATION = "policy_iteration"  # `iteration` says which
     PERIODIC = "periodic"
     RELEARNED = "relearned"  # after a detected drop, at `drop_step`
+    POLICY_MAP = "policy_map"  # clustered traces of a trained policy (ch. 9.6), `labels` per row
 
 
 class WorldEventKind(StrEnum):
@@ -299,6 +300,8 @@ class Embedding:
         The number of policy iterations the traces come from (trigger ``policy_iteration``).
     drop_step : int or None
         The step at which a reward drop was detected (trigger ``relearned``).
+    labels : tuple of int
+        Cluster of each row (trigger ``policy_map``); empty otherwise.
     """
 
     agent_id: str
@@ -314,6 +317,7 @@ class Embedding:
     metrics: dict[str, float] = field(default_factory=dict)
     iteration: int = 0
     drop_step: int | None = None
+    labels: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -163,7 +163,7 @@ class Truth(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., tensors: _Optional[_Iterable[_Union[Tensor, _Mapping]]] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ...) -> None: ...
 
 class Embedding(_message.Message):
-    __slots__ = ("schema_version", "agent_id", "world_id", "version", "trigger", "ids", "coordinates", "eigenvalues", "has_procrustes", "procrustes_error", "step", "timestamp", "metrics", "iteration", "drop_step")
+    __slots__ = ("schema_version", "agent_id", "world_id", "version", "trigger", "ids", "coordinates", "eigenvalues", "has_procrustes", "procrustes_error", "step", "timestamp", "metrics", "iteration", "drop_step", "labels")
     class MetricsEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -186,6 +186,7 @@ class Embedding(_message.Message):
     METRICS_FIELD_NUMBER: _ClassVar[int]
     ITERATION_FIELD_NUMBER: _ClassVar[int]
     DROP_STEP_FIELD_NUMBER: _ClassVar[int]
+    LABELS_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     agent_id: str
     world_id: str
@@ -201,7 +202,8 @@ class Embedding(_message.Message):
     metrics: _containers.ScalarMap[str, float]
     iteration: int
     drop_step: int
-    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., version: _Optional[int] = ..., trigger: _Optional[str] = ..., ids: _Optional[_Iterable[int]] = ..., coordinates: _Optional[_Union[Tensor, _Mapping]] = ..., eigenvalues: _Optional[_Iterable[float]] = ..., has_procrustes: _Optional[bool] = ..., procrustes_error: _Optional[float] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., metrics: _Optional[_Mapping[str, float]] = ..., iteration: _Optional[int] = ..., drop_step: _Optional[int] = ...) -> None: ...
+    labels: _containers.RepeatedScalarFieldContainer[int]
+    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., version: _Optional[int] = ..., trigger: _Optional[str] = ..., ids: _Optional[_Iterable[int]] = ..., coordinates: _Optional[_Union[Tensor, _Mapping]] = ..., eigenvalues: _Optional[_Iterable[float]] = ..., has_procrustes: _Optional[bool] = ..., procrustes_error: _Optional[float] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., metrics: _Optional[_Mapping[str, float]] = ..., iteration: _Optional[int] = ..., drop_step: _Optional[int] = ..., labels: _Optional[_Iterable[int]] = ...) -> None: ...
 
 class AttachConfig(_message.Message):
     __slots__ = ("seed", "detector", "program", "program_params")

@@ -3,10 +3,12 @@
 Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and barrier, random policy),
 `retina` (ch. 4: saccade learning curves, lesion with the basic vs robust rule, reversal detected
 by the agent itself), `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
-1-D depth map, on the PyBullet robot and on the Middlebury stereo pair) and `mountaincar` (ch. 8:
+1-D depth map, on the PyBullet robot and on the Middlebury stereo pair), `mountaincar` (ch. 8:
 steps-to-goal curves of the staged program on three bodies, against true-state and random agents,
-and a baseline change while driving) and `rovingeye` (ch. 5.2: Table 5.1, the five ways of making
-traces, Fig 5.8 scree and Fig 5.11 embeddings). Runs go to worker processes (spawned); results are written to
+and a baseline change while driving), `rovingeye` (ch. 5.2: Table 5.1, the five ways of making
+traces, Fig 5.8 scree and Fig 5.11 embeddings) and `chapter9` (beyond the dissertation: probabilistic
+embedding in a slippery gridworld, option discovery, mountain-car policy maps, Isomap and
+state-aided vergence traces). Runs go to worker processes (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
 
@@ -535,19 +537,26 @@ def rovingeye(runs: int, quick: bool, workers: int, out: str) -> dict:
     return chapter(runs, quick, workers, out)
 
 
+def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.chapter9 import chapter9 as run
+
+    return run(runs, quick, workers, out)
+
+
 CHAPTERS = {
     "gridworld": gridworld,
     "retina": retina,
     "vergence": vergence,
     "mountaincar": mountaincar,
     "rovingeye": rovingeye,
+    "chapter9": chapter9,
 }
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
-        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, rovingeye)",
+        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, rovingeye, chapter9)",
         description=__doc__,
     )
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")

@@ -23,6 +23,16 @@ from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding, Observation, Truth
 from sensorimotor.tools.replay import classify
 
+PALETTE = np.array(
+    [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75], [227, 119, 194]],
+    dtype=np.uint8,
+)
+
+
+def cluster_colours(labels: tuple[int, ...]) -> np.ndarray:
+    """One colour per cluster label (a policy map's `labels`), cycling through a fixed palette."""
+    return PALETTE[np.asarray(labels, dtype=np.int64) % len(PALETTE)]
+
 
 def truth_colours(truth: Truth | None, ids: tuple[int, ...]) -> np.ndarray | None:
     """RGB from the true coordinates (x -> red, y -> green, blue constant) so that a good
@@ -64,11 +74,12 @@ class RerunLogger:
                 e = codec.decode(Embedding, payload)
                 self._time(t, e.step)
                 pts = e.coordinates if e.coordinates.shape[1] >= 2 else np.c_[e.coordinates, np.zeros(len(e.ids))]
+                # a policy map (clustered traces of a trained policy) is its own picture, coloured by cluster
                 rr.log(
-                    f"{wid}/embedding",
+                    f"{wid}/policy_map" if e.labels else f"{wid}/embedding",
                     rr.Points2D(
                         pts[:, :2],
-                        colors=truth_colours(self.truth.get(wid), e.ids),
+                        colors=cluster_colours(e.labels) if e.labels else truth_colours(self.truth.get(wid), e.ids),
                         radii=0.5 if len(e.ids) < 200 else 0.2,
                     ),
                 )

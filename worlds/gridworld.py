@@ -3,6 +3,8 @@
 The agent sees only an opaque state id (cells are numbered in a shuffled order), never the cell
 coordinates; those are the ground truth its embedding is scored against. The `barrier` variant
 places a wall that divides most of the grid (Fig 5.1b). Moves into walls or off the grid stay put.
+With `slip` > 0 transitions are stochastic (ch. 9.4): a move goes to one of its two sideways
+neighbours with that probability (half each); the default 0 keeps the world deterministic.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ class GridWorldParams:
     actions: int = option(4, "moves: 4 (compass) or 8 (with diagonals)", choices=(4, 8))
     goal: tuple[int, int] | None = option(None, "goal cell x,y (none: the centre)")
     max_episode_steps: int = option(100, "steps after which an episode ends without the goal", min=1)
+    slip: float = option(0.0, "probability that a move goes sideways instead (ch. 9.4)", min=0.0, max=1.0)
 
 
 @dataclass(frozen=True)
@@ -97,6 +100,7 @@ class GridWorld(World):
         self.names = NAMES4 if actions == 4 else NAMES8
         self.goal = goal if goal is not None else (size // 2, size // 2)
         self.max_episode_steps = max_episode_steps
+        self.slip = float(prm.slip)
         self.walls = barrier_cells(size) if barrier else set()
         if self.goal in self.walls or not (0 <= self.goal[0] < size and 0 <= self.goal[1] < size):
             raise ValueError(f"goal {self.goal} is not a free cell")
@@ -124,7 +128,8 @@ class GridWorld(World):
                 "barrier": str(self.barrier).lower(),
                 "actions": str(len(self.moves)),
                 "goal": f"{self.goal[0]},{self.goal[1]}",
-            },
+            }
+            | ({"slip": str(self.slip)} if self.slip else {}),
         )
 
     def _obs(self, reward: float, done: bool) -> StepResult:
@@ -144,6 +149,8 @@ class GridWorld(World):
         if not 0 <= a < len(self.moves):
             raise ValueError(f"action {a} out of range 0..{len(self.moves) - 1}")
         dx, dy = self.moves[a]
+        if self.slip > 0 and self.rng.random() < self.slip:
+            dx, dy = (-dy, dx) if self.rng.random() < 0.5 else (dy, -dx)  # sideways: a quarter turn
         nxt = (self.pos[0] + dx, self.pos[1] + dy)
         if 0 <= nxt[0] < self.size and 0 <= nxt[1] < self.size and nxt not in self.walls:
             self.pos = nxt

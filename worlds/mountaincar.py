@@ -58,6 +58,9 @@ class MountainCarWorldParams:
     render_grid: float = option(0.005, "render cache cell, m of track (> 0)")
     goal_window: int = option(10, "perceptual-goal search, steps either side of the geometric fixation", min=0)
     cache_size: int = option(60_000, "rendered eye pairs kept in the cache", min=1)
+    thrust_noise: float = option(
+        0.0, "std of Gaussian noise added to each drive's thrust, in units of the engine's push (ch. 9.4)", min=0.0
+    )
 
 
 class MountainCarWorld(VergenceWorld):
@@ -236,7 +239,8 @@ class MountainCarWorld(VergenceWorld):
             return self._obs(1.0 if self.k == self.perceptual_goal() else 0.0, False)
         if a not in (REVERSE, COAST, FORWARD):
             raise ValueError(f"action must be 0..4 (converge, diverge, reverse, coast, forward), got {a}")
-        self.x, self.v, reached = car_step(self.x, self.v, a - COAST, self.car)
+        noise = float(self.rng.normal(0.0, self.params.thrust_noise)) if self.params.thrust_noise > 0 else 0.0
+        self.x, self.v, reached = car_step(self.x, self.v, a - COAST, self.car, noise)
         self.z = float(self.z_of(self.x))
         self.theta, self.k = 0.0, 0
         self.car_t += 1

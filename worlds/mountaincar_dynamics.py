@@ -27,11 +27,14 @@ class MountainCarParams:
     goal: float = 1.9
 
 
-def step(x: float, v: float, a: int, prm: MountainCarParams = MountainCarParams()) -> tuple[float, float, bool]:
-    """One step: (x', v', reached the goal)."""
+def step(
+    x: float, v: float, a: int, prm: MountainCarParams = MountainCarParams(), noise: float = 0.0
+) -> tuple[float, float, bool]:
+    """One step: (x', v', reached the goal). `noise` is extra thrust in units of the engine's push
+    `p` (a noisy world draws it per step, ch. 9.4; 0: the deterministic Eq 8.1-8.6)."""
     if a not in (-1, 0, 1):
         raise ValueError(f"action must be -1, 0 or 1, got {a}")
-    v2 = min(max(v + a * prm.p + prm.A * math.cos(prm.w * x + prm.phi), -prm.v_max), prm.v_max)
+    v2 = min(max(v + (a + noise) * prm.p + prm.A * math.cos(prm.w * x + prm.phi), -prm.v_max), prm.v_max)
     x2 = x + v2
     if x2 <= prm.x_min:
         x2, v2 = prm.x_min, 0.0

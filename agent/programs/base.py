@@ -64,6 +64,7 @@ class EmbeddingOutput:
     absolute: bool = False  # coordinates are in the truth's own units (E_geometry is meaningful)
     iteration: int = 0
     drop_step: int | None = None
+    labels: tuple[int, ...] = ()  # trigger policy_map: cluster of each row
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,31 @@ class Program(abc.ABC):
     def emit(self, item: Any) -> None:
         """Queue an `EmbeddingOutput` or `EventOutput` for the link (see `drain`)."""
         self._outbox.append(item)
+
+    def emit_policy_map(
+        self, traces: list[Any], ids: tuple[int, ...], step: int, n_clusters: int | None = None, kind: str = "edit"
+    ) -> None:
+        """Emit a policy map (ch. 9.6): the embedded traces of the program's trained policy from the
+        start states `ids`, clustered; an `Embedding` with trigger ``policy_map`` and a cluster label
+        per row, which `sme view` colours by cluster. Any program with a trained policy can call it."""
+        from sensorimotor.agent.embedding.policy_map import policy_map
+
+        if len(traces) < 3:
+            return
+        pm = policy_map(traces, n_clusters=n_clusters, kind=kind, seed=self.seed)
+        sizes = np.bincount(pm.labels, minlength=pm.n_clusters)
+        self.emit(
+            EmbeddingOutput(
+                trigger=Trigger.POLICY_MAP,
+                ids=tuple(int(i) for i in ids),
+                coordinates=pm.coordinates,
+                eigenvalues=tuple(float(e) for e in pm.eigenvalues[:10]),
+                step=step,
+                metrics={"clusters": float(pm.n_clusters), "silhouette": pm.silhouette}
+                | {f"cluster_{c}_size": float(n) for c, n in enumerate(sizes)},
+                labels=tuple(int(v) for v in pm.labels),
+            )
+        )
 
     def world_restarted(self) -> None:
         """The world process restarted (new session): an episode in progress is gone."""

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances, update_trace_distances
+from sensorimotor.agent.embedding.probabilistic import estimate_distances, relative_change
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
@@ -35,6 +36,15 @@ class GridworldProgramParams:
     dims: int = option(2, "embedding dimensions (classical MDS)", min=1)
     policy: str = option("lspi", "policy whose traces are embedded", choices=("lspi", "random"))
     substitution_cost: int = option(2, "edit-distance cost of a substitution (2: indel distance)", min=1)
+    policy_map: int = option(0, "clusters of a policy map emitted after each embedding (0: none; ch. 9.6)", min=0)
+    estimator: str = option(
+        "plain",
+        "trace distances: one trace per start (plain), or for stochastic worlds the mode of sampled traces "
+        "or the mean distance over sampled pairs, sweeping again until the distances settle (ch. 9.4)",
+        choices=("plain", "mode", "mean"),
+    )
+    settle_tol: float = option(0.02, "sampling stops when the distances change by less than this (relative)", min=0.0)
+    max_samples: int = option(64, "most sampled traces per start state (estimators mode, mean)", min=2)
 
 
 class GridworldProgram(Program):
@@ -78,6 +88,10 @@ class GridworldProgram(Program):
         self._seen: set[tuple[int, int]] = set()
         self._last_traces: list[list[int]] = []
         self._D: np.ndarray | None = None
+        # estimators mode/mean: sampled traces per start, the last estimate, consecutive settled rounds
+        self._samples: list[list[list[int]]] = []
+        self._estimate: np.ndarray | None = None
+        self._calm = 0
 
     # helpers -----------------------------------------------------------------------------------
     def _state(self, obs: Observation) -> int:
@@ -98,13 +112,31 @@ class GridworldProgram(Program):
     def _cycle(self, obs: Observation, trace: list[int]) -> bool:
         """The greedy policy is a deterministic function of (state, previous action): a repeat is a
         cycle that never reaches the goal, so the trace ends there."""
-        return bool(trace) and self.policy == "lspi" and (self._state(obs), trace[-1]) in self._seen
+        stochastic = self.params.estimator != "plain"  # a repeat is no cycle when the world may slip
+        return bool(trace) and self.policy == "lspi" and not stochastic and (self._state(obs), trace[-1]) in self._seen
+
+    def _settled(self) -> bool:
+        """Estimators mode/mean: add this sweep's traces as one more sample per start; True once the
+        distance estimate has moved by less than `settle_tol` twice running (or at `max_samples`)."""
+        traces = self._sweep.traces
+        if len(self._samples) != len(traces):
+            self._samples = [[] for _ in traces]
+        for s, t in zip(self._samples, traces, strict=True):
+            s.append(list(t))
+        D = estimate_distances(self._samples, self.params.estimator, self.substitution_cost)
+        if self._estimate is not None:
+            self._calm = self._calm + 1 if relative_change(D, self._estimate) < self.params.settle_tol else 0
+        self._estimate = D
+        return self._calm >= 2 or len(self._samples[0]) >= self.params.max_samples
 
     def _finish_embedding(self, step: int) -> None:
         # only the rows of start states whose trace changed since the last embedding are recomputed
         traces = self._sweep.traces
         prev, D = self._last_traces, self._D
-        if D is None or len(prev) != len(traces):
+        if self.params.estimator != "plain":
+            assert self._estimate is not None, "a settled estimate exists after _settled()"
+            D = self._estimate
+        elif D is None or len(prev) != len(traces):
             D = trace_distances(traces, kind="edit", substitution_cost=self.substitution_cost)
         else:
             changed = [i for i, (a, b) in enumerate(zip(prev, traces, strict=False)) if a != b]
@@ -127,9 +159,12 @@ class GridworldProgram(Program):
                     "samples": float(self.lspi.n_samples),
                     "goal_reached_fraction": reached / len(traces),
                     "mean_trace_length": float(np.mean([len(t) for t in traces])),
+                    "samples_per_start": float(len(self._samples[0]) if self._samples else 1),
                 },
             )
         )
+        if self.params.policy_map and self.policy == "lspi":
+            self.emit_policy_map(traces, tuple(range(len(traces))), step, self.params.policy_map)
 
     # the program -------------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
@@ -165,7 +200,11 @@ class GridworldProgram(Program):
         # phase == "embed": run the greedy policy from every start state
         dec = self._sweep.step(obs, self._choose, self._cycle)
         if self._sweep.finished:
+            if self.params.estimator != "plain" and not self._settled():
+                self._sweep, self._seen = StartStateSweep(self.spec.n_starts, self.max_trace), set()
+                return self._sweep.begin()  # sample every start state once more
             self._finish_embedding(obs.step)
+            self._samples, self._estimate, self._calm = [], None, 0
             self.phase = "explore"
         return dec
 
@@ -183,6 +222,9 @@ class GridworldProgram(Program):
             "seen": sorted(list(p) for p in self._seen),
             "last_traces": [list(t) for t in self._last_traces],
             "D": array_or_none(self._D),
+            "samples": [[list(t) for t in s] for s in self._samples],
+            "estimate": array_or_none(self._estimate),
+            "calm": self._calm,
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -200,6 +242,9 @@ class GridworldProgram(Program):
         self._seen = {(int(s), int(a)) for s, a in state["seen"]}
         self._last_traces = [[int(a) for a in t] for t in state["last_traces"]]
         self._D = array_or_none(state["D"])
+        self._samples = [[[int(a) for a in t] for t in s] for s in state.get("samples", [])]
+        self._estimate = array_or_none(state.get("estimate"))
+        self._calm = int(state.get("calm", 0))
 
     def world_restarted(self) -> None:
         """Drop the pending sample and restart the trace in progress."""

@@ -70,6 +70,9 @@ class MountainCarProgramParams:
     watch_after: int = option(50_000, "training car steps before episodes report performance", min=0)
     report_after: int = option(400, "car steps after which a trained driver gives up an episode", min=1)
     process_var: float = option(1e-5, "process variance of the velocity Kalman filter", min=0.0)
+    policy_map: int = option(
+        0, "clusters of a policy map of the drive traces emitted after each evaluation (0: none; ch. 9.6)", min=0
+    )
 
 
 class MountainCarProgram(Program):
@@ -153,6 +156,8 @@ class MountainCarProgram(Program):
         self._eval_i = 0
         self._eval_steps: list[int] = []
         self._eval_reached: list[bool] = []
+        self._eval_traces: list[list[int]] = []  # drive actions of each evaluation episode (policy maps)
+        self._eval_trace: list[int] = []
         self.curve: list[tuple[int, float]] = []
         self.episode_log: list[tuple[int, int]] = []  # (training steps at the end, car steps) per training episode
         self.relearn_at: int | None = None
@@ -287,6 +292,7 @@ class MountainCarProgram(Program):
         s = np.array([pos, vel])
         if self.evaluating:
             a = sarsa.greedy(s)
+            self._eval_trace.append(a)
         else:
             a = sarsa.act(s)
             if self._s is None:
@@ -310,6 +316,8 @@ class MountainCarProgram(Program):
         if self.evaluating:
             self._eval_steps.append(self._ep_steps)
             self._eval_reached.append(reached)
+            self._eval_traces.append(self._eval_trace)
+            self._eval_trace = []
             self._eval_i += 1
             if self._eval_i < self.n_eval:
                 return self._eval_reset()
@@ -325,6 +333,9 @@ class MountainCarProgram(Program):
                     {"steps_to_goal": mean, "training_steps": float(self.training_steps), "failures": float(failed)},
                 )
             )
+            if self.params.policy_map:
+                ids = tuple(range(self.n_positions, self.n_positions + len(self._eval_traces)))
+                self.emit_policy_map(self._eval_traces, ids, obs.step, self.params.policy_map)
             self.phase = "drive"
             self._start_training_episode()
             return Decision(reset=True, start=-1)
@@ -351,10 +362,12 @@ class MountainCarProgram(Program):
     def _begin_evaluation(self) -> Decision:
         self.phase = "evaluate"
         self._eval_i, self._eval_steps, self._eval_reached = 0, [], []
+        self._eval_traces, self._eval_trace = [], []
         return self._eval_reset()
 
     def _eval_reset(self) -> Decision:
         self._start_training_episode()
+        self._eval_trace = []
         return Decision(reset=True, start=self.n_positions + self._eval_i)
 
     # Program interface ---------------------------------------------------------------------------
@@ -435,6 +448,8 @@ class MountainCarProgram(Program):
             "eval_i": self._eval_i,
             "eval_steps": list(self._eval_steps),
             "eval_reached": list(self._eval_reached),
+            "eval_traces": [list(t) for t in self._eval_traces],
+            "eval_trace": list(self._eval_trace),
             "curve": [list(c) for c in self.curve],
             "episode_log": [list(e) for e in self.episode_log],
             "relearn_at": self.relearn_at,
@@ -484,6 +499,8 @@ class MountainCarProgram(Program):
         self._eval_i = int(state["eval_i"])
         self._eval_steps = [int(n) for n in state["eval_steps"]]
         self._eval_reached = [bool(r) for r in state["eval_reached"]]
+        self._eval_traces = [[int(a) for a in t] for t in state.get("eval_traces", [])]
+        self._eval_trace = [int(a) for a in state.get("eval_trace", [])]
         self.curve = [(int(n), float(m)) for n, m in state["curve"]]
         self.episode_log = [(int(n), int(k)) for n, k in state["episode_log"]]
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
