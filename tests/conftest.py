@@ -11,9 +11,19 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-import pytest
+# One BLAS thread, for this process and the `sme` processes tests start (they inherit the
+# environment): the tests' linear algebra is small (LSPI solves of a few hundred features), where
+# BLAS threads only contend with the other test processes; on a busy 2-core machine a 256x256 solve
+# took 0.16 s threaded against 3 ms on one thread.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from sensorimotor.tools.common import free_port
+import pytest  # noqa: E402
+from threadpoolctl import threadpool_limits  # noqa: E402
+
+from sensorimotor.tools.common import free_port  # noqa: E402
+
+threadpool_limits(1, user_api="blas")  # numpy may already be loaded: limit it in place too
 
 ROOT = Path(__file__).resolve().parents[1]
 
