@@ -121,7 +121,9 @@ class Background:
         self.inline = inline
         _limit_blas()
         self.clock = 0  # acts so far (ticks)
-        self.waits = 0  # ticks that had to wait for a job (its work took longer than `lag` acts)
+        # ticks that had to wait for a job (its work took longer than `lag` acts): a measurement of
+        # this run's machine, not state (not saved)
+        self.waits = 0
         self._jobs: dict[str, _Job] = {}
 
     def tick(self) -> list[tuple[str, Any]]:
@@ -177,7 +179,6 @@ class Background:
         are configuration. Arguments are stored as given: the snapshot convention's leaves."""
         return {
             "clock": self.clock,
-            "waits": self.waits,
             "jobs": {name: {"fn": j.fn, "args": j.args, "due": j.due} for name, j in self._jobs.items()},
         }
 
@@ -185,6 +186,6 @@ class Background:
         """Continue from a `state()` snapshot: jobs in flight are started again from their saved
         arguments (pure functions: the same results) and swap in at the same acts."""
         self.cancel()
-        self.clock, self.waits = int(state["clock"]), int(state.get("waits", 0))
+        self.clock = int(state["clock"])
         for name, j in sorted(state["jobs"].items(), key=lambda kv: int(kv[1]["due"])):
             self._start(name, _Job(str(j["fn"]), dict(j["args"]), int(j["due"])))
