@@ -167,6 +167,12 @@ class Background:
             if job.future is not None:
                 job.future.exception()
 
+    def discard(self, name: str) -> None:
+        """Forget job `name` if it is in flight (its result is never swapped in)."""
+        job = self._jobs.pop(name, None)
+        if job is not None and job.future is not None:
+            job.future.cancel()
+
     def cancel(self) -> None:
         """Forget every job in flight (their results are never swapped in)."""
         for job in self._jobs.values():

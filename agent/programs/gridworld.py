@@ -39,8 +39,11 @@ class GridworldProgramParams:
     dims: int = option(2, "embedding dimensions (classical MDS)", min=1)
     policy: str = option("lspi", "policy whose traces are embedded", choices=("lspi", "random"))
     substitution_cost: int = option(2, "edit-distance cost of a substitution (2: indel distance)", min=1)
-    learn_lag: int = option(
-        400, "acts between the start of a background learning job (LSPI, MDS) and the act that uses it", min=1
+    learn_lag: int | None = option(
+        None,
+        "acts between the start of a background learning job (LSPI, MDS) and the act that uses it "
+        "(none: samples_per_iteration, the learning pace of a program without background jobs)",
+        min=1,
     )
 
 
@@ -109,7 +112,7 @@ class GridworldProgram(Program):
         self._last_traces: list[list[int]] = []
         self._D: np.ndarray | None = None
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
-        self.use_background(prm.learn_lag)
+        self.use_background(prm.learn_lag or prm.samples_per_iteration)
 
     # helpers -----------------------------------------------------------------------------------
     def _state(self, obs: Observation) -> int:
