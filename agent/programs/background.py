@@ -63,7 +63,7 @@ def _pool() -> ThreadPoolExecutor:
 
 
 def function_name(fn: Callable[..., Any]) -> str:
-    """"module:qualname" of a module-level function (what a saved job names)."""
+    """ "module:qualname" of a module-level function (what a saved job names)."""
     name = f"{fn.__module__}:{fn.__qualname__}"
     if "<" in fn.__qualname__ or resolve(name) is not fn:
         raise ValueError(f"a background job must be a module-level function, not {name}")

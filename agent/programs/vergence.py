@@ -41,7 +41,9 @@ def lspi_job(
 ) -> dict[str, Any]:
     """One LSPI iteration (RBF features of the foveal difference, 2 actions) over a snapshot of the
     samples: the new weights and their change. A pure function, run off the act path."""
-    lspi = LSPI(RBFBasis(tuple(float(c) for c in centres), float(width), 2), gamma=gamma, ridge=ridge, capacity=capacity)
+    lspi = LSPI(
+        RBFBasis(tuple(float(c) for c in centres), float(width), 2), gamma=gamma, ridge=ridge, capacity=capacity
+    )
     lspi.restore(samples)
     change = lspi.iterate()
     return {"w": lspi.w, "change": change}
