@@ -119,3 +119,17 @@ def test_checkpoint_with_a_job_in_flight_restores_the_same_continuation(tmp_path
     lockstep(world, 1500, [link, twin])
     assert assert_same_outputs(original, restored) >= 1
     assert_same_tree(twin_program.state(), program.state())
+
+
+def test_bench_gap_refuses_unknown_modes_and_bad_bounds(capsys):
+    import argparse
+
+    from sensorimotor.tools.bench.gap import main_args
+
+    def args(**kw):
+        base = {"seconds": 1.0, "modes": "inline", "retina_embed_every": 50, "warmup": 0, "json": True}
+        return argparse.Namespace(**{**base, **kw})
+
+    assert main_args(args(modes="fast")) == 2
+    assert "unknown mode" in capsys.readouterr().err
+    assert main_args(args(seconds=0.0)) == 2

@@ -155,10 +155,10 @@ class VergenceProgramParams:
         tuple(float(c) for c in np.linspace(0.0, 0.2, 11)), "RBF centres over the foveal difference d"
     )
     width: float = option(0.02, "RBF width")
-    learn_lag: int | None = option(
-        None,
+    learn_lag: int = option(
+        50,
         "acts between the start of a background learning job (LSPI, MDS) and the act that uses it "
-        "(none: samples_per_iteration, the learning pace of a program without background jobs)",
+        "(the LSPI has 24 features: a few ms; a short lag keeps the practice samples near the current policy)",
         min=1,
     )
 
@@ -192,7 +192,7 @@ class VergenceProgram(Program):
         self.phase = "explore"
         self._sweep = StartStateSweep(spec.n_starts, max_trace)
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
-        self.use_background(prm.learn_lag or samples_per_iteration)
+        self.use_background(prm.learn_lag)
 
     def act(self, obs: Observation) -> Decision:
         """Explore (feeding LSPI) or, after each LSPI iteration, sweep the start states and embed;

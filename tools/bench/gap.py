@@ -6,8 +6,9 @@ swapped in `lag` acts later), in one run.
 The agent daemon runs in this process (its default: every world answered from the bus callback),
 the two worlds in their own processes (`sme world gridworld|retina --stats-json`); each world
 measures every step's gap (observation published -> its action received, resends included).
-The agent side also times each `WorldLink.answer` (decode excluded): the time the act path itself
-took, which tells the agent's own blocking from the machine's scheduling of three processes.
+The agent side also times each `WorldLink.answer` (decode excluded), in wall time and in the act
+thread's own CPU time: a long wall time with a short CPU time is the act thread not running (the
+OS scheduling a busy machine, or another thread holding the GIL), not work on the act path.
 """
 
 from __future__ import annotations
@@ -65,15 +66,16 @@ def run_mode(mode: str, seconds: float, retina_embed_every: int, warmup: int) ->
             wid = getattr(msg, "world_id", "")
             embeddings[wid] = embeddings.get(wid, 0) + 1
 
-    answer_ms: dict[str, list[float]] = {}
+    answer_ms: dict[str, list[tuple[float, float]]] = {}  # (wall, this thread's CPU) per answer
     original = WorldLink.answer
 
     def timed(link: WorldLink, obs: object) -> object:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.thread_time()
         try:
             return original(link, obs)  # type: ignore[arg-type]
         finally:
-            answer_ms.setdefault(link.world_id, []).append((time.perf_counter() - t) * 1e3)
+            wall, cpu = (time.perf_counter() - t) * 1e3, (time.thread_time() - c) * 1e3
+            answer_ms.setdefault(link.world_id, []).append((wall, cpu))
 
     procs: dict[str, subprocess.Popen] = {}
     quiet = logging.getLogger("sme.agent")
@@ -92,6 +94,7 @@ def run_mode(mode: str, seconds: float, retina_embed_every: int, warmup: int) ->
             daemon.start()
             th = threading.Thread(target=daemon.run, daemon=True)
             th.start()
+            load = os.getloadavg()[0]  # the machine's state: a shared machine stretches every gap
             for kind in WORLDS:
                 cmd = [sys.executable, "-m", "sensorimotor.tools.cli", "world", kind, "--id", f"gap-{kind}"]
                 cmd += ["--seconds", str(seconds), "--warmup", str(warmup), "--stats-json", os.path.join(tmp, kind)]
@@ -116,7 +119,7 @@ def run_mode(mode: str, seconds: float, retina_embed_every: int, warmup: int) ->
                     st = json.load(f)
                 link = links.get(f"gap-{kind}")
                 bg = link.program.background if link is not None else None
-                ms = np.asarray(answer_ms.get(f"gap-{kind}", [])[warmup:] or [0.0])
+                ms = np.asarray(answer_ms.get(f"gap-{kind}", [])[warmup:] or [(0.0, 0.0)])
                 rows.append(
                     {
                         "bench": "gap",
@@ -130,8 +133,10 @@ def run_mode(mode: str, seconds: float, retina_embed_every: int, warmup: int) ->
                         "p50_ms": st.get("p50_ms"),
                         "p99_ms": st.get("p99_ms"),
                         "max_ms": st.get("max_ms"),
-                        "agent_answer_p99_ms": round(float(np.percentile(ms, 99)), 4),
-                        "agent_answer_max_ms": round(float(ms.max()), 4),
+                        "agent_answer_p99_ms": round(float(np.percentile(ms[:, 0], 99)), 4),
+                        "agent_answer_max_ms": round(float(ms[:, 0].max()), 4),
+                        "agent_answer_cpu_max_ms": round(float(ms[:, 1].max()), 4),
+                        "load_average": round(load, 2),
                         "learning_waits": None if bg is None else bg.waits,
                         "target_max_ms": TARGET_MAX_MS,
                     }
@@ -156,7 +161,8 @@ def main(seconds: float, modes: tuple[str, ...], retina_embed_every: int, warmup
                     f"{mode:<10} {r['world']:<9} {r['steps']:>7} steps {r['steps_per_s']:>8,.0f}/s  "
                     f"{r['embeddings']:>3} embeddings  gap p50 {r['p50_ms']} ms  p99 {r['p99_ms']} ms  "
                     f"max {r['max_ms']} ms; agent answer p99 {r['agent_answer_p99_ms']} ms "
-                    f"max {r['agent_answer_max_ms']} ms",
+                    f"max {r['agent_answer_max_ms']} ms (CPU {r['agent_answer_cpu_max_ms']} ms); "
+                    f"load {r['load_average']}",
                     flush=True,
                 )
         if not as_json:
