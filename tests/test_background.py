@@ -70,8 +70,7 @@ def _gridworld_run(inline: bool, steps: int) -> tuple[list, list]:
     try:
         w = GridWorld(seed=1)
         p = make_program(w.spec(), 1, samples_per_iteration=200, learn_lag=150)
-        actions: list = []
-        run = run_inprocess(w, p, steps, on_step=lambda k, obs: actions.append(obs.step))
+        run = run_inprocess(w, p, steps)
     finally:
         Program.inline_background = False
     return run.embeddings, run.events("policy_iteration")
@@ -133,3 +132,27 @@ def test_bench_gap_refuses_unknown_modes_and_bad_bounds(capsys):
     assert main_args(args(modes="fast")) == 2
     assert "unknown mode" in capsys.readouterr().err
     assert main_args(args(seconds=0.0)) == 2
+
+
+def test_observations_fed_again_give_the_same_embeddings_as_offline_replay_does():
+    """What `sme replay --offline` does - the recorded observations through a fresh link - gives the
+    live run's embeddings byte for byte, though the live jobs ran in threads and these run inline."""
+    world = GridWorld(seed=2)
+    spec = world.spec()
+    params = {"samples_per_iteration": 200, "learn_lag": 120}
+    seen: list = []
+    live = run_inprocess(world, make_program(spec, 2, **params), 4000, on_step=lambda k, obs: seen.append(obs))
+    Program.inline_background = True
+    try:
+        again = Recorder()
+        link = WorldLink("offline", spec, make_program(spec, 2, **params), again)
+        link.truth = world.truth()
+        for obs in seen:
+            link.answer(obs)
+    finally:
+        Program.inline_background = False
+    replayed = [o for o in again.outputs if hasattr(o, "coordinates")]
+    assert len(live.embeddings) >= 3 and len(replayed) == len(live.embeddings)
+    for a, b in zip(live.embeddings, replayed, strict=True):
+        assert (a.version, a.step, a.procrustes_error) == (b.version, b.step, b.procrustes_error)
+        assert a.coordinates.tobytes() == b.coordinates.tobytes()
