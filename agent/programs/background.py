@@ -144,7 +144,8 @@ class Background:
 
     def submit(self, name: str, fn: Callable[..., Any], **args: Any) -> None:
         """Start job `name`: `fn(**args)` (a module-level function of copies of the program's
-        values), due `lag` acts from now. One job per name at a time."""
+        values, which it must not change: they are the job's saved state), due `lag` acts from
+        now. One job per name at a time."""
         if name in self._jobs:
             raise RuntimeError(f"background job {name!r} is already running")
         self._start(name, _Job(function_name(fn), args, self.clock + self.lag))

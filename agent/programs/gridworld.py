@@ -65,7 +65,11 @@ def embed_job(
         D = trace_distances(traces, kind="edit", substitution_cost=substitution_cost)
     else:
         changed = [i for i, (a, b) in enumerate(zip(last_traces, traces, strict=False)) if list(a) != list(b)]
-        D = update_trace_distances(D, traces, changed, kind="edit", substitution_cost=substitution_cost)
+        # update_trace_distances writes into D: a copy, a job never changes its arguments (they are
+        # the saved state of the job in flight)
+        D = update_trace_distances(
+            np.array(D, copy=True), traces, changed, kind="edit", substitution_cost=substitution_cost
+        )
     mds = classical_mds(D, dims)
     return {"D": D, "coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
 
