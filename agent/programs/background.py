@@ -17,8 +17,11 @@ the bounded wait: `act` blocks only when a job takes longer than `lag` steps of 
 
 Jobs run on a thread pool shared by the process. Their work is numpy/scipy/rapidfuzz (BLAS,
 LAPACK, sparse products and edit distances release the GIL); the pure-Python glue left in a job
-takes the GIL for at most the interpreter's switch interval (5 ms) at a time, which `sme bench gap`
-measures against the act thread. BLAS is limited to one thread for the whole process once a
+takes the GIL for up to the interpreter's switch interval at a time, which is lowered from 5 ms to
+0.5 ms for the process once the pool exists (measured: a thread sleeping 0.5 ms at a time beside a
+gridworld LSPI + MDS job woke late by up to 21 ms at 5 ms, up to 5.4 ms at 0.5 ms; C calls that keep
+the GIL, e.g. building arrays from lists, make the rest). A process pool would remove that too, at
+the price of copying each snapshot to another process; `sme bench gap` measures what is left. BLAS is limited to one thread for the whole process once a
 program uses background jobs: a multi-threaded OpenBLAS on a busy machine made a 324 x 324 solve
 take 0.4-1.2 s instead of 2-7 ms (spinning threads fighting for the cores, the act thread among
 them), and one thread count for every job keeps float results the same from run to run.
@@ -31,6 +34,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import sys
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -39,6 +43,8 @@ from typing import Any
 
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
+# the interpreter's GIL switch interval once jobs run in threads (the default is 5 ms)
+SWITCH_INTERVAL = 0.0005
 _BLAS_LIMITED = False
 
 
@@ -58,6 +64,7 @@ def _pool() -> ThreadPoolExecutor:
     global _POOL
     with _POOL_LOCK:
         if _POOL is None:
+            sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
             _POOL = ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 1), thread_name_prefix="sme-learn")
         return _POOL
 
