@@ -71,7 +71,11 @@ class NodeStats:
         if self.measured_seconds:
             out["steady_steps_per_s"] = round(self.measured_steps / self.measured_seconds, 1)
         if lat.size:
-            out.update(p50_ms=round(float(np.percentile(lat, 50)), 4), p99_ms=round(float(np.percentile(lat, 99)), 4))
+            out.update(
+                p50_ms=round(float(np.percentile(lat, 50)), 4),
+                p99_ms=round(float(np.percentile(lat, 99)), 4),
+                max_ms=round(float(lat.max()), 4),
+            )
         return out
 
 

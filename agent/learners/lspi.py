@@ -164,6 +164,19 @@ class LSPI:
         self.w = w
         self.iterations = int(state["iterations"])
 
+    def samples(self) -> dict[str, Any]:
+        """The stored samples and weights, as list copies (cheap: for a background job's snapshot;
+        `restore` takes it like a `state()`)."""
+        return {
+            "s": list(self._s),
+            "a": list(self._a),
+            "r": list(self._r),
+            "s_next": list(self._s2),
+            "done": list(self._done),
+            "w": self.w.copy(),
+            "iterations": self.iterations,
+        }
+
     @property
     def n_samples(self) -> int:
         """Number of samples stored."""

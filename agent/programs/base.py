@@ -24,6 +24,11 @@ sweeps, detectors):
   ValueError or KeyError when the snapshot does not fit the configuration.
 
 `sensorimotor.agent.checkpoint` writes these snapshots as arrays plus JSON, never as a pickle.
+
+Learning off the act path: a program whose learning is slow (policy iteration, an embedding)
+calls `use_background(lag)` in its constructor, `self.background.tick()` first thing in every
+`act`, and `self.background.submit(...)` to start a job; see `agent.programs.background`. The
+jobs in flight are part of `state()` (the base class saves and restores them).
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from sensorimotor.agent.programs.background import Background
 from sensorimotor.agent.snapshot import rng_state, set_rng_state
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 from sensorimotor.protocol.params import parse
@@ -95,11 +101,20 @@ class Program(abc.ABC):
     # shorter warm-up for one value per episode than for one per step
     detector_params: dict[str, Any] = {}
 
+    # set for every new Background (tests run the jobs on the act thread to compare)
+    inline_background: ClassVar[bool] = False
+
     def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
         self.spec = spec
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._outbox: list[Any] = []
+        self.background: Background | None = None
+
+    def use_background(self, lag: int) -> Background:
+        """Opt in to learning off the act path: jobs swapped in `lag` acts after they start."""
+        self.background = Background(lag, inline=Program.inline_background)
+        return self.background
 
     @abc.abstractmethod
     def act(self, obs: Observation) -> Decision:
@@ -153,13 +168,18 @@ class Program(abc.ABC):
     def state(self) -> dict[str, Any]:
         """A snapshot of what the program learned and where it is (see the module docstring).
         Subclasses extend the base's dict; outputs not yet drained are not part of it."""
-        return {"seed": self.seed, "rng": rng_state(self.rng)}
+        out: dict[str, Any] = {"seed": self.seed, "rng": rng_state(self.rng)}
+        if self.background is not None:
+            out["background"] = self.background.state()
+        return out
 
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from a `state()` snapshot of a program built with the same spec and params."""
         self.seed = int(state["seed"])
         set_rng_state(self.rng, state["rng"])
         self._outbox = []
+        if self.background is not None:
+            self.background.restore(state.get("background", {"clock": 0, "jobs": {}}))
 
 
 class EchoProgram(Program):

@@ -15,6 +15,10 @@ samples, then features are refitted and LSPI iterates; *embed*: the greedy polic
 state (`StartStateSweep`), trace distances, classical MDS, Embedding vN. Each finished trace's score
 (gamma^length when it reached a reward, else 0) feeds the drop detector; on a drop the samples are
 dropped, the policy relearned from fresh experience and the next embedding says `relearned`.
+
+The feature refit + policy iteration and the distances + MDS run off the act path
+(`agent.programs.background`), each swapped in `learn_lag` acts after it starts; the program
+explores meanwhile (those samples count toward the next iteration).
 """
 
 from __future__ import annotations
@@ -55,6 +59,12 @@ class GenericProgramParams:
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     watch_after: float = option(
         0.9, "the drop detector watches once a sweep reaches the goal from this fraction of starts", min=0.0, max=1.0
+    )
+    learn_lag: int = option(
+        75,
+        "acts between the start of a background learning job (feature refit + LSPI, MDS) and the act "
+        "that uses it (short: the samples taken meanwhile come from the previous policy)",
+        min=1,
     )
 
 
@@ -144,6 +154,77 @@ class _RBFFeatures:
         return sp.csr_matrix((f.ravel(), cols, np.arange(0, f.size + 1, self.m)), shape=(rows.size, self.k))
 
 
+def _basis_state(b: _RBFFeatures) -> dict[str, Any]:
+    return {
+        "mean": b.mean.copy(),
+        "axes": b.axes.copy(),
+        "scale": b.scale.copy(),
+        "centres": b.centres.copy(),
+        "width": b.width,
+    }
+
+
+def _set_basis(b: _RBFFeatures, s: dict[str, Any]) -> None:
+    b.mean, b.axes, b.scale = (np.array(s[k], dtype=np.float64) for k in ("mean", "axes", "scale"))
+    b.centres, b.width = np.array(s["centres"], dtype=np.float64), float(s["width"])
+    b.forget(slice(None))
+
+
+def iterate_job(
+    n_states: int,
+    n_actions: int,
+    gamma: float,
+    ridge: float,
+    capacity: int,
+    iterations: int,
+    samples: dict[str, Any],
+    store: np.ndarray | None,
+    basis: dict[str, Any] | None,
+    refit: np.ndarray | None,
+    fit: dict[str, Any],
+) -> dict[str, Any]:
+    """Feature refit (when `refit` holds the reservoir sample) and up to `iterations` LSPI
+    iterations over a snapshot of the samples: the new basis (if refitted), weights, iterations
+    done and the last change. Tabular when `store` is None. A pure function, run off the act path."""
+    if store is None:
+        lspi = LSPI(TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=capacity)
+    else:
+        rbf = _RBFFeatures(np.asarray(store), n_actions, int(fit["centres"]))
+        if refit is not None:
+            rbf.fit(
+                np.asarray(refit, dtype=np.float64), int(fit["components"]), int(fit["centres"]), float(fit["width"])
+            )
+        else:
+            assert basis is not None
+            _set_basis(rbf, basis)
+        lspi = LSPI(rbf, gamma=gamma, ridge=ridge, capacity=capacity)
+    lspi.restore(samples)
+    change, done = 0.0, 0
+    for _ in range(iterations):  # policy iteration until the weights settle
+        change = lspi.iterate()
+        done += 1
+        if change <= 1e-3 * (float(np.linalg.norm(lspi.w)) + 1e-12):
+            break
+    return {
+        "w": lspi.w,
+        "iterations": done,
+        "change": change,
+        "basis": None if store is None or refit is None else _basis_state(rbf),
+    }
+
+
+def embed_job(traces: list[list[int]], actions: np.ndarray | None, dims: int) -> dict[str, Any]:
+    """Trace distances (edit distance of discrete actions; padded sum of the action values when
+    `actions` is the table of a discretised box) and classical MDS. A pure function, run off the act path."""
+    if actions is None:
+        D = trace_distances(traces, kind="edit", substitution_cost=2)
+    else:
+        table = np.asarray(actions)
+        D = trace_distances([table[np.asarray(t, dtype=np.int64)] for t in traces], kind="continuous")
+    mds = classical_mds(D, dims)
+    return {"coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
+
+
 class GenericProgram(Program):
     """Learns any world that declares start states: see the module docstring."""
 
@@ -199,6 +280,8 @@ class GenericProgram(Program):
         self._said_no_starts = False
         self._watching = False  # the detector sees trace scores only once the policy is good
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
+        self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
+        self.use_background(prm.learn_lag)
 
     # observations -> states --------------------------------------------------------------------
     def _vector(self, obs: Observation) -> np.ndarray:
@@ -241,24 +324,44 @@ class GenericProgram(Program):
         return w @ f
 
     # the program -------------------------------------------------------------------------------
-    def _iterate(self, step: int) -> None:
+    def _iterate(self) -> None:
+        """Start the refit + policy iteration job on a snapshot; `_iterated` swaps its result in."""
         prm = self.params
+        refit = None
         if not self.tabular and self._seen >= 2 * self._fitted_at:
             # refit while experience still doubles; later fits would only reshuffle a settled basis
             n = min(self._seen, self._reservoir.shape[0])
-            self._rbf.fit(self._reservoir[:n].astype(np.float64), prm.components, prm.centres, prm.width)
+            refit = self._reservoir[:n].astype(np.float64)
             self._fitted_at = self._seen
-        change = 0.0
-        for _ in range(prm.lspi_iterations):  # policy iteration until the weights settle
-            change = self.lspi.iterate()
-            if change <= 1e-3 * (float(np.linalg.norm(self.lspi.w)) + 1e-12):
-                break
+        assert self.background is not None
+        self.background.submit(
+            "lspi",
+            iterate_job,
+            n_states=self.n_states if self.tabular else 0,
+            n_actions=self.n_actions,
+            gamma=self.lspi.gamma,
+            ridge=self.lspi.ridge,
+            capacity=self.lspi.capacity,
+            iterations=prm.lspi_iterations,
+            samples=self.lspi.samples(),
+            store=None if self.tabular else self._store.copy(),
+            basis=None if self.tabular else _basis_state(self._rbf),
+            refit=refit,
+            fit={"components": prm.components, "centres": prm.centres, "width": prm.width},
+        )
+
+    def _iterated(self, result: dict[str, Any], step: int) -> None:
+        """The job's basis and weights swapped in; report the policy iteration."""
+        if result["basis"] is not None:
+            _set_basis(self._rbf, result["basis"])
+        self.lspi.w = np.asarray(result["w"], dtype=np.float64)
+        self.lspi.iterations += int(result["iterations"])
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
                 f"LSPI iteration {self.lspi.iterations}",
                 step,
-                {"weight_change": change, "samples": float(self.lspi.n_samples)},
+                {"weight_change": float(result["change"]), "samples": float(self.lspi.n_samples)},
             )
         )
 
@@ -277,44 +380,64 @@ class GenericProgram(Program):
         return bool(trace) and (self._key(obs), trace[-1]) in self._visited
 
     def _embed(self, step: int, relearned: bool) -> None:
-        """Embed the sweep's traces; `relearned`: the first good policy after a drop (the trigger
-        says so, with the drop's step)."""
-        traces = self._sweep.traces
-        if self.discrete:
-            D = trace_distances(traces, kind="edit", substitution_cost=2)
-        else:
-            D = trace_distances([self.actions[np.asarray(t, dtype=np.int64)] for t in traces], kind="continuous")
-        mds = classical_mds(D, self.params.dims)
+        """Start the distances + MDS job on the sweep's traces; `relearned`: the first good policy
+        after a drop (the trigger will say so, with the drop's step)."""
+        traces = [list(t) for t in self._sweep.traces]
         n = len(traces)
+        assert self.background is not None
+        self.background.submit(
+            "embed",
+            embed_job,
+            traces=traces,
+            actions=None if self.discrete else self.actions.copy(),
+            dims=self.params.dims,
+        )
+        self._pending_embedding = {
+            "step": step,
+            "n": n,
+            "relearned": relearned,
+            "drop_step": self.relearn_at if relearned else None,
+            "iteration": self.lspi.iterations,
+            "lspi_iterations": float(self.lspi.iterations),
+            "samples": float(self.lspi.n_samples),
+            "goal_reached_fraction": self._sweep.rewarded / n,
+            "mean_trace_length": float(np.mean([len(t) for t in traces])),
+            "rewarded": self._sweep.rewarded,
+        }
+        if relearned:
+            self.relearn_at = None
+
+    def _embedded(self, result: dict[str, Any]) -> None:
+        """The distances + MDS job's result swapped in: emit Embedding vN (and `relearned`)."""
+        p = self._pending_embedding
+        assert p is not None
+        self._pending_embedding = None
+        n, step = int(p["n"]), int(p["step"])
+        eig = np.asarray(result["eigenvalues"])
         self.emit(
             EmbeddingOutput(
-                Trigger.RELEARNED if relearned else Trigger.POLICY_ITERATION,
+                Trigger.RELEARNED if p["relearned"] else Trigger.POLICY_ITERATION,
                 tuple(range(n)),
-                mds.coordinates,
-                tuple(float(e) for e in mds.eigenvalues[: min(10, len(mds.eigenvalues))]),
+                np.asarray(result["coordinates"]),
+                tuple(float(e) for e in eig[: min(10, len(eig))]),
                 step,
-                {
-                    "lspi_iterations": float(self.lspi.iterations),
-                    "samples": float(self.lspi.n_samples),
-                    "goal_reached_fraction": self._sweep.rewarded / n,
-                    "mean_trace_length": float(np.mean([len(t) for t in traces])),
-                },
-                iteration=self.lspi.iterations,
-                drop_step=self.relearn_at if relearned else None,
+                {k: float(p[k]) for k in ("lspi_iterations", "samples", "goal_reached_fraction", "mean_trace_length")},
+                iteration=int(p["iteration"]),
+                drop_step=None if p["drop_step"] is None else int(p["drop_step"]),
             )
         )
-        if relearned:
+        if p["relearned"]:
             self.emit(
                 EventOutput(
                     EventKind.RELEARNED,
-                    f"the policy reaches the goal again from {self._sweep.rewarded} of {n} starts",
+                    f"the policy reaches the goal again from {int(p['rewarded'])} of {n} starts",
                     step,
-                    {"drop_step": float(self.relearn_at or 0)},
+                    {"drop_step": float(p["drop_step"] or 0)},
                 )
             )
-            self.relearn_at = None
 
     def act(self, obs: Observation) -> Decision:
+        s: int | None = None
         if self.phase == "explore":
             s = self._state(obs)
             if obs.t > 0 and self._prev is not None:
@@ -322,14 +445,25 @@ class GenericProgram(Program):
                 self.lspi.learn_one(ps, pa, obs.reward, s, obs.done)
                 self.new_samples += 1
             self._prev = None
-            if self.new_samples >= self.params.samples_per_iteration:
+        assert self.background is not None
+        iterated = False
+        for name, result in self.background.tick():
+            if name == "embed":
+                self._embedded(result)
+            elif name == "lspi":
+                self._iterated(result, obs.step)
+                iterated = True
+        if self.phase == "explore":
+            assert s is not None
+            if iterated and self.spec.n_starts >= 2:
+                self._prev = None
+                self.phase = "embed"
+                self._sweep = StartStateSweep(self.spec.n_starts, self.params.max_trace)
+                return self._sweep.begin()
+            if self.new_samples >= self.params.samples_per_iteration and not self.background.pending("lspi"):
                 self.new_samples = 0
-                self._iterate(obs.step)
-                if self.spec.n_starts >= 2:
-                    self.phase = "embed"
-                    self._sweep = StartStateSweep(self.spec.n_starts, self.params.max_trace)
-                    return self._sweep.begin()
-                if not self._said_no_starts:
+                self._iterate()
+                if self.spec.n_starts < 2 and not self._said_no_starts:
                     self._said_no_starts = True
                     self.emit(
                         EventOutput(
@@ -368,6 +502,8 @@ class GenericProgram(Program):
         """The body changed: what was learned no longer holds; relearn from fresh samples."""
         self.relearn_at = step
         self.lspi.reset()
+        assert self.background is not None
+        self.background.discard("lspi")  # an iteration over the dropped samples is never swapped in
         self.new_samples = 0
         self._prev = None
         self.phase = "explore"
@@ -398,20 +534,12 @@ class GenericProgram(Program):
             "fitted_at": self._fitted_at,
             "said_no_starts": self._said_no_starts,
             "watching": self._watching,
+            "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
+            # (observation, previous action) pairs met on the trace in progress: its cycle check
+            "visited": sorted([key.hex(), a] for key, a in self._visited),
         }
         if not self.tabular:
-            b = self._rbf
-            out.update(
-                store=self._store.copy(),
-                reservoir=self._reservoir.copy(),
-                basis={
-                    "mean": b.mean.copy(),
-                    "axes": b.axes.copy(),
-                    "scale": b.scale.copy(),
-                    "centres": b.centres.copy(),
-                    "width": b.width,
-                },
-            )
+            out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=_basis_state(self._rbf))
         return out
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -427,13 +555,13 @@ class GenericProgram(Program):
         self._fitted_at = int(state["fitted_at"])
         self._said_no_starts = bool(state["said_no_starts"])
         self._watching = bool(state["watching"])
+        pending = state.get("pending_embedding")
+        self._pending_embedding = None if pending is None else dict(pending)
+        self._visited = {(bytes.fromhex(str(h)), int(a)) for h, a in state.get("visited", [])}
         if not self.tabular:
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
-            b, s = self._rbf, state["basis"]
-            b.mean, b.axes, b.scale = (np.array(s[k], dtype=np.float64) for k in ("mean", "axes", "scale"))
-            b.centres, b.width = np.array(s["centres"], dtype=np.float64), float(s["width"])
-            b.forget(slice(None))
+            _set_basis(self._rbf, state["basis"])
 
 
 __all__ = ["GenericProgram", "GenericProgramParams"]

@@ -5,6 +5,10 @@ Phases alternate: *explore* (uniformly random actions, samples stored for LSPI) 
 `samples_per_iteration` new samples have arrived, one LSPI iteration, then *embed*: run the greedy
 policy from each start state in turn (the world resets to it), record the action traces, edit
 distances, classical MDS to 2-D, emit Embedding vN. Error falls as LSPI iterates (Fig 5.4).
+
+The LSPI iteration and the distances + MDS run off the act path (`agent.programs.background`):
+each is swapped in `learn_lag` acts after it starts, and the program goes on exploring meanwhile
+(samples taken while LSPI runs count toward the next iteration).
 """
 
 from __future__ import annotations
@@ -45,6 +49,47 @@ class GridworldProgramParams:
     )
     settle_tol: float = option(0.02, "sampling stops when the distances change by less than this (relative)", min=0.0)
     max_samples: int = option(64, "most sampled traces per start state (estimators mode, mean)", min=2)
+    learn_lag: int | None = option(
+        None,
+        "acts between the start of a background learning job (LSPI, MDS) and the act that uses it "
+        "(none: samples_per_iteration, the learning pace of a program without background jobs)",
+        min=1,
+    )
+
+
+def lspi_job(n_states: int, n_actions: int, gamma: float, ridge: float, samples: dict[str, Any]) -> dict[str, Any]:
+    """One LSPI iteration over a snapshot of the samples (`LSPI.samples`): the new weights and
+    their change. A pure function, run off the act path."""
+    lspi = LSPI(TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=max(1, len(samples["s"])))
+    lspi.restore(samples)
+    change = lspi.iterate()
+    return {"w": lspi.w, "change": change}
+
+
+def embed_job(
+    traces: list[list[int]],
+    last_traces: list[list[int]],
+    D: np.ndarray | None,
+    dims: int,
+    substitution_cost: int,
+    estimate: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """Edit distances between the traces (only rows whose trace changed since `last_traces` are
+    recomputed when `D` is theirs), or a settled `estimate` of them (estimators mode/mean), and
+    classical MDS to `dims`. A pure function, run off the act path."""
+    if estimate is not None:
+        D = np.asarray(estimate)
+    elif D is None or len(last_traces) != len(traces):
+        D = trace_distances(traces, kind="edit", substitution_cost=substitution_cost)
+    else:
+        changed = [i for i, (a, b) in enumerate(zip(last_traces, traces, strict=False)) if list(a) != list(b)]
+        # update_trace_distances writes into D: a copy, a job never changes its arguments (they are
+        # the saved state of the job in flight)
+        D = update_trace_distances(
+            np.array(D, copy=True), traces, changed, kind="edit", substitution_cost=substitution_cost
+        )
+    mds = classical_mds(D, dims)
+    return {"D": D, "coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
 
 
 class GridworldProgram(Program):
@@ -92,6 +137,8 @@ class GridworldProgram(Program):
         self._samples: list[list[list[int]]] = []
         self._estimate: np.ndarray | None = None
         self._calm = 0
+        self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
+        self.use_background(prm.learn_lag or prm.samples_per_iteration)
 
     # helpers -----------------------------------------------------------------------------------
     def _state(self, obs: Observation) -> int:
@@ -130,67 +177,119 @@ class GridworldProgram(Program):
         return self._calm >= 2 or len(self._samples[0]) >= self.params.max_samples
 
     def _finish_embedding(self, step: int) -> None:
-        # only the rows of start states whose trace changed since the last embedding are recomputed
-        traces = self._sweep.traces
-        prev, D = self._last_traces, self._D
-        if self.params.estimator != "plain":
-            assert self._estimate is not None, "a settled estimate exists after _settled()"
-            D = self._estimate
-        elif D is None or len(prev) != len(traces):
-            D = trace_distances(traces, kind="edit", substitution_cost=self.substitution_cost)
-        else:
-            changed = [i for i, (a, b) in enumerate(zip(prev, traces, strict=False)) if a != b]
-            D = update_trace_distances(D, traces, changed, kind="edit", substitution_cost=self.substitution_cost)
-        self._last_traces, self._D = [list(t) for t in traces], D
-        mds = classical_mds(D, self.dims)
+        """The sweep is over: start the distances + MDS job; `_embedded` emits its result."""
+        traces = [list(t) for t in self._sweep.traces]
+        assert self.background is not None
+        self.background.submit(
+            "embed",
+            embed_job,
+            traces=traces,
+            last_traces=[list(t) for t in self._last_traces],
+            D=None if self._D is None else self._D.copy(),
+            estimate=None if self.params.estimator == "plain" else self._estimate,
+            dims=self.dims,
+            substitution_cost=self.substitution_cost,
+        )
+        self._pending_embedding = {
+            "step": step,
+            "traces": traces,
+            "iteration": 0 if self.policy == "random" else self.lspi.iterations,
+            "lspi_iterations": float(self.lspi.iterations),
+            "samples": float(self.lspi.n_samples),
+            "goal_reached_fraction": self._sweep.rewarded / len(traces),
+            "mean_trace_length": float(np.mean([len(t) for t in traces])),
+            "samples_per_start": float(len(self._samples[0]) if self._samples else 1),
+        }
+
+    def _embedded(self, result: dict[str, Any]) -> None:
+        """The distances + MDS job's result swapped in: emit Embedding vN."""
+        pending = self._pending_embedding
+        assert pending is not None
+        self._pending_embedding = None
+        self._last_traces, self._D = [list(t) for t in pending["traces"]], np.asarray(result["D"])
+        eigenvalues = np.asarray(result["eigenvalues"])
         self.version += 1
-        reached = self._sweep.rewarded
         trigger = Trigger.RANDOM_POLICY if self.policy == "random" else Trigger.POLICY_ITERATION
         self.emit(
             EmbeddingOutput(
                 trigger=trigger,
-                iteration=0 if self.policy == "random" else self.lspi.iterations,
-                ids=tuple(range(len(traces))),
-                coordinates=mds.coordinates,
-                eigenvalues=tuple(float(e) for e in mds.eigenvalues[: min(10, len(mds.eigenvalues))]),
-                step=step,
+                iteration=int(pending["iteration"]),
+                ids=tuple(range(len(pending["traces"]))),
+                coordinates=np.asarray(result["coordinates"]),
+                eigenvalues=tuple(float(e) for e in eigenvalues[: min(10, len(eigenvalues))]),
+                step=int(pending["step"]),
                 metrics={
-                    "lspi_iterations": float(self.lspi.iterations),
-                    "samples": float(self.lspi.n_samples),
-                    "goal_reached_fraction": reached / len(traces),
-                    "mean_trace_length": float(np.mean([len(t) for t in traces])),
-                    "samples_per_start": float(len(self._samples[0]) if self._samples else 1),
+                    k: float(pending.get(k, 1.0))  # a job saved before samples_per_start existed
+                    for k in (
+                        "lspi_iterations",
+                        "samples",
+                        "goal_reached_fraction",
+                        "mean_trace_length",
+                        "samples_per_start",
+                    )
                 },
             )
         )
         if self.params.policy_map and self.policy == "lspi":
-            self.emit_policy_map(traces, tuple(range(len(traces))), step, self.params.policy_map)
+            traces = pending["traces"]
+            self.emit_policy_map(traces, tuple(range(len(traces))), int(pending["step"]), self.params.policy_map)
+
+    def _iterated(self, result: dict[str, Any], step: int) -> Decision:
+        """The LSPI job's weights swapped in: report the iteration and sweep with the new policy."""
+        self.lspi.w = np.asarray(result["w"], dtype=np.float64)
+        self.lspi.iterations += 1
+        self.emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"LSPI iteration {self.lspi.iterations}",
+                step,
+                {"weight_change": float(result["change"]), "samples": float(self.lspi.n_samples)},
+            )
+        )
+        return self._begin_sweep()
+
+    def _begin_sweep(self) -> Decision:
+        self._prev = None
+        self.phase, self._seen = "embed", set()
+        self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
+        return self._sweep.begin()
 
     # the program -------------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
-        """Explore (storing LSPI samples) or sweep the start states with the greedy policy and embed."""
+        """Explore (storing LSPI samples) or sweep the start states with the greedy policy; LSPI and
+        the embedding run in the background and are swapped in `learn_lag` acts after they start."""
         s = self._state(obs)
+        if self.phase == "explore" and obs.t > 0 and self._prev is not None:
+            ps, pa = self._prev
+            self.lspi.learn_one(ps, pa, obs.reward, s, obs.done)
+            self.new_samples += 1
+        self._prev = None
+        assert self.background is not None
+        sweep: Decision | None = None
+        for name, result in self.background.tick():
+            if name == "embed":
+                self._embedded(result)
+            elif name == "lspi":
+                sweep = self._iterated(result, obs.step)
+        if sweep is not None:
+            return sweep
         if self.phase == "explore":
-            if obs.t > 0 and self._prev is not None:
-                ps, pa = self._prev
-                self.lspi.learn_one(ps, pa, obs.reward, s, obs.done)
-                self.new_samples += 1
-            self._prev = None
-            if self.new_samples >= self.samples_per_iteration:
+            # the embed job of the last sweep may still run: it is due before the next sweep ends
+            busy = self.background.pending("lspi" if self.policy == "lspi" else "embed")
+            if self.new_samples >= self.samples_per_iteration and not busy:
                 self.new_samples = 0
-                if self.policy == "lspi":
-                    change = self.lspi.iterate()
-                    self.emit(
-                        EventOutput(
-                            EventKind.POLICY_ITERATION,
-                            f"LSPI iteration {self.lspi.iterations}",
-                            obs.step,
-                            {"weight_change": change, "samples": float(self.lspi.n_samples)},
-                        )
-                    )
-                self.phase, self._seen = "embed", set()
-                self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
-                return self._sweep.begin()
+                if self.policy != "lspi":
+                    return self._begin_sweep()
+                lspi = self.lspi
+                self.background.submit(
+                    "lspi",
+                    lspi_job,
+                    n_states=self.n_states,
+                    n_actions=self.n_actions,
+                    gamma=lspi.gamma,
+                    ridge=lspi.ridge,
+                    samples=lspi.samples(),
+                )
             if obs.done:
                 return Decision(reset=True, start=-1)
             a = int(self.rng.integers(self.n_actions))
@@ -225,6 +324,7 @@ class GridworldProgram(Program):
             "samples": [[list(t) for t in s] for s in self._samples],
             "estimate": array_or_none(self._estimate),
             "calm": self._calm,
+            "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -245,6 +345,8 @@ class GridworldProgram(Program):
         self._samples = [[[int(a) for a in t] for t in s] for s in state.get("samples", [])]
         self._estimate = array_or_none(state.get("estimate"))
         self._calm = int(state.get("calm", 0))
+        pending = state.get("pending_embedding")
+        self._pending_embedding = None if pending is None else dict(pending)
 
     def world_restarted(self) -> None:
         """Drop the pending sample and restart the trace in progress."""

@@ -19,6 +19,7 @@ import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
+from sensorimotor.agent.programs.background import Background
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.protocol.errors import SpecMismatch
@@ -33,6 +34,26 @@ def foveal_difference(obs: Observation) -> float:
     if left.shape != right.shape:
         raise SpecMismatch(f"left {left.shape} and right {right.shape} foveae differ in shape")
     return float(np.abs(left - right).mean())
+
+
+def lspi_job(
+    centres: list[float], width: float, gamma: float, ridge: float, capacity: int, samples: dict[str, Any]
+) -> dict[str, Any]:
+    """One LSPI iteration (RBF features of the foveal difference, 2 actions) over a snapshot of the
+    samples: the new weights and their change. A pure function, run off the act path."""
+    lspi = LSPI(
+        RBFBasis(tuple(float(c) for c in centres), float(width), 2), gamma=gamma, ridge=ridge, capacity=capacity
+    )
+    lspi.restore(samples)
+    change = lspi.iterate()
+    return {"w": lspi.w, "change": change}
+
+
+def embed_job(traces: list[list[int]]) -> dict[str, Any]:
+    """Edit distances between vergence traces and classical MDS to 1-D (depth). A pure function,
+    run off the act path."""
+    mds = classical_mds(trace_distances(traces, kind="edit", substitution_cost=2), 1)
+    return {"coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
 
 
 class VergencePractice:
@@ -52,22 +73,53 @@ class VergencePractice:
         self.new_samples = 0
         self._prev: tuple[float, int] | None = None
 
-    def observe(self, obs: Observation, d: float, terminal: bool, emit: Callable[[EventOutput], None]) -> bool:
-        """Learn from the step that led to `obs`; True when an LSPI iteration has just run."""
+    def observe(
+        self,
+        obs: Observation,
+        d: float,
+        terminal: bool,
+        emit: Callable[[EventOutput], None],
+        background: Background | None = None,
+    ) -> bool:
+        """Learn from the step that led to `obs`; True when an LSPI iteration has just run. With a
+        `background`, the iteration is started there as job "lspi" instead (False), and the owner
+        hands its result to `iterated` when it is swapped in."""
         if obs.t > 0 and self._prev is not None:
             self.lspi.learn_one(self._prev[0], self._prev[1], obs.reward, d, terminal)
             self.new_samples += 1
         self._prev = None
         if self.new_samples < self.samples_per_iteration:
             return False
+        if background is not None:
+            if not background.pending("lspi"):
+                self.new_samples = 0
+                basis = self.lspi.basis
+                assert isinstance(basis, RBFBasis)
+                background.submit(
+                    "lspi",
+                    lspi_job,
+                    centres=[float(c) for c in basis.centres],
+                    width=float(basis.width),
+                    gamma=self.lspi.gamma,
+                    ridge=self.lspi.ridge,
+                    capacity=self.lspi.capacity,
+                    samples=self.lspi.samples(),
+                )
+            return False
         self.new_samples = 0
-        change = self.lspi.iterate()
+        return self.iterated({"w": None, "change": self.lspi.iterate()}, obs.step, emit)
+
+    def iterated(self, result: dict[str, Any], step: int, emit: Callable[[EventOutput], None]) -> bool:
+        """An LSPI iteration's result (`lspi_job`; w None: already in place): report it; True."""
+        if result["w"] is not None:
+            self.lspi.w = np.asarray(result["w"], dtype=np.float64)
+            self.lspi.iterations += 1
         emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
                 f"LSPI iteration {self.lspi.iterations}",
-                obs.step,
-                {"weight_change": change},
+                step,
+                {"weight_change": float(result["change"])},
             )
         )
         return True
@@ -103,6 +155,12 @@ class VergenceProgramParams:
         tuple(float(c) for c in np.linspace(0.0, 0.2, 11)), "RBF centres over the foveal difference d"
     )
     width: float = option(0.02, "RBF width")
+    learn_lag: int = option(
+        50,
+        "acts between the start of a background learning job (LSPI, MDS) and the act that uses it "
+        "(the LSPI has 24 features: a few ms; a short lag keeps the practice samples near the current policy)",
+        min=1,
+    )
 
 
 class VergenceProgram(Program):
@@ -133,12 +191,25 @@ class VergenceProgram(Program):
         self.practice = VergencePractice(self.lspi, self.rng, samples_per_iteration, epsilon)
         self.phase = "explore"
         self._sweep = StartStateSweep(spec.n_starts, max_trace)
+        self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
+        self.use_background(prm.learn_lag)
 
     def act(self, obs: Observation) -> Decision:
-        """Explore (feeding LSPI) or, after each LSPI iteration, sweep the start states and embed."""
+        """Explore (feeding LSPI) or, after each LSPI iteration, sweep the start states and embed;
+        LSPI and the embedding run in the background, swapped in `learn_lag` acts after they start."""
         d = foveal_difference(obs)
+        bg = self.background
+        assert bg is not None
+        iterated = False
         if self.phase == "explore":
-            if self.practice.observe(obs, d, obs.done, self.emit):
+            self.practice.observe(obs, d, obs.done, self.emit, bg)
+        for name, result in bg.tick():
+            if name == "embed":
+                self._embedded(result)
+            elif name == "lspi":
+                iterated = self.practice.iterated(result, obs.step, self.emit)
+        if self.phase == "explore":
+            if iterated:
                 self.phase = "embed"
                 self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
                 return self._sweep.begin()
@@ -152,23 +223,36 @@ class VergenceProgram(Program):
         return dec
 
     def _embed(self, step: int) -> None:
-        traces = self._sweep.traces
-        D = trace_distances(traces, kind="edit", substitution_cost=2)
-        mds = classical_mds(D, 1)
+        """The sweep is over: start the distances + MDS job; `_embedded` emits its result."""
+        traces = [list(t) for t in self._sweep.traces]
         n = len(traces)
+        assert self.background is not None
+        self.background.submit("embed", embed_job, traces=traces)
+        self._pending_embedding = {
+            "step": step,
+            "n": n,
+            "iteration": self.lspi.iterations,
+            "lspi_iterations": float(self.lspi.iterations),
+            "policy_success": self._sweep.rewarded / n,
+            "mean_trace_length": float(np.mean([len(t) for t in traces])),
+        }
+
+    def _embedded(self, result: dict[str, Any]) -> None:
+        """The distances + MDS job's result swapped in: emit the embedding."""
+        p = self._pending_embedding
+        assert p is not None
+        self._pending_embedding = None
+        n = int(p["n"])
+        eig = np.asarray(result["eigenvalues"])
         self.emit(
             EmbeddingOutput(
                 Trigger.POLICY_ITERATION,
                 tuple(range(n)),
-                mds.coordinates,
-                tuple(float(e) for e in mds.eigenvalues[: min(10, n)]),
-                step,
-                {
-                    "lspi_iterations": float(self.lspi.iterations),
-                    "policy_success": self._sweep.rewarded / n,
-                    "mean_trace_length": float(np.mean([len(t) for t in traces])),
-                },
-                iteration=self.lspi.iterations,
+                np.asarray(result["coordinates"]),
+                tuple(float(e) for e in eig[: min(10, n)]),
+                int(p["step"]),
+                {k: float(p[k]) for k in ("lspi_iterations", "policy_success", "mean_trace_length")},
+                iteration=int(p["iteration"]),
             )
         )
 
@@ -180,6 +264,7 @@ class VergenceProgram(Program):
             "practice": self.practice.state(),
             "phase": self.phase,
             "sweep": self._sweep.state(),
+            "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -190,6 +275,8 @@ class VergenceProgram(Program):
         self.phase = str(state["phase"])
         self._sweep = StartStateSweep(self.spec.n_starts, self.max_trace)
         self._sweep.restore(state["sweep"])
+        pending = state.get("pending_embedding")
+        self._pending_embedding = None if pending is None else dict(pending)
 
     def world_restarted(self) -> None:
         """Drop the pending sample and restart the trace in progress."""

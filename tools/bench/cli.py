@@ -8,11 +8,11 @@ import argparse
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench",
-        help="benchmarks (loop, embedding, record, detectors, world, fuzz, soak)",
+        help="benchmarks (loop, embedding, record, detectors, world, fuzz, gap, soak)",
         description="Run a benchmark; see its --help.",
     )
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
-    from sensorimotor.tools.bench import detectors, embedding, fuzz, loop, record, soak, world
+    from sensorimotor.tools.bench import detectors, embedding, fuzz, gap, loop, record, soak, world
 
     loop.add_parser(bsub)
     embedding.add_parser(bsub)
@@ -20,5 +20,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     detectors.add_parser(bsub)
     world.add_parser(bsub)
     fuzz.add_parser(bsub)
+    gap.add_parser(bsub)
     soak.add_parser(bsub)
     p.set_defaults(func=lambda a: p.print_help() or 2)
