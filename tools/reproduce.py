@@ -5,7 +5,8 @@ Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and bar
 by the agent itself), `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
 1-D depth map, on the PyBullet robot and on the Middlebury stereo pair) and `mountaincar` (ch. 8:
 steps-to-goal curves of the staged program on three bodies, against true-state and random agents,
-and a baseline change while driving). Runs go to worker processes (spawned); results are written to
+and a baseline change while driving) and `objectpose` (ch. 6: the generic program's embedding of
+object pose against PCA and Isomap, Fig 6.3, and the alignment task of Fig 6.4). Runs go to worker processes (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
 
@@ -528,13 +529,25 @@ def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
     return {"results": res, "finals": finals, "ci95": ci, "welch_p": tests, "live": live, "markdown": "\n".join(lines)}
 
 
-CHAPTERS = {"gridworld": gridworld, "retina": retina, "vergence": vergence, "mountaincar": mountaincar}
+def objectpose(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.objectpose import chapter
+
+    return chapter(runs, quick, workers, out)
+
+
+CHAPTERS = {
+    "gridworld": gridworld,
+    "retina": retina,
+    "vergence": vergence,
+    "mountaincar": mountaincar,
+    "objectpose": objectpose,
+}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
-        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar)",
+        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, objectpose)",
         description=__doc__,
     )
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")

@@ -55,6 +55,9 @@ WORLDS: dict[str, WorldKind] = {
     "mountaincar": WorldKind(
         "mountaincar", "MountainCarWorld", "MountainCarWorldParams", "the visual mountain car (ch. 8)"
     ),
+    "objectpose": WorldKind(
+        "objectpose", "ObjectPoseWorld", "ObjectPoseWorldParams", "a textured box turned in pitch and yaw (ch. 6)"
+    ),
     "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }
 
