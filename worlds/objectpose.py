@@ -8,10 +8,11 @@ refused by the box (it stays). The observation is the camera image only: grey, `
 px, float32 in [0, 1]. Start states are every pose of the pitch x yaw lattice within the range;
 truth = (pitch, yaw) in radians.
 
-Perceptual goal (section 6.2): for each lattice pose the box is seen twice, a small turn apart, at
-`goal_image` px; ORB features, RANSAC fundamental matrix, RANSAC homography; the score is the mean
-interpoint distance of the coplanar inliers (`coplanar_spread`). The goal is the pose where it is
-largest (a face seen head-on): reaching it gives reward 1 and ends the episode. The score is
+Perceptual goal (section 6.2): for each lattice pose the box is seen as it is and turned a little
+(`goal_turn`) both ways, at `goal_image` px; ORB features, RANSAC fundamental matrix, RANSAC
+homography; the score is the mean interpoint distance of the coplanar inliers (`coplanar_spread`),
+averaged over the two pairs. The goal is the pose where it is largest (a face seen head-on):
+reaching it gives reward 1 and ends the episode. The score is
 expensive, so it is computed once per pose, the first time the world needs the goal, and kept in
 memory for every world of the process with the same rendering parameters (nothing is written).
 """
@@ -30,7 +31,7 @@ from pybullet_utils.bullet_client import BulletClient
 from threadpoolctl import threadpool_limits
 
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
-from sensorimotor.protocol.params import option, parse
+from sensorimotor.protocol.params import ParamError, option, parse
 from sensorimotor.worlds.base import StepResult, World
 from sensorimotor.worlds.bullet import disconnect
 from sensorimotor.worlds.coplanar_spread import coplanar_spread
@@ -45,14 +46,17 @@ FACES = ("immunohistochemistry", "coffee", "chelsea", "rocket", "astronaut", "ca
 class ObjectPoseWorldParams:
     """Parameters of the object-pose world (ch. 6)."""
 
-    image: int = option(32, "observed camera image side, px (grey)", min=8, max=128)
-    supersample: int = option(4, "render at this many times the image side, then average down", min=1, max=8)
+    image: int = option(100, "observed camera image side, px (grey; 100: the 10,000 dimensions of Fig 6.5)", min=8, max=128)
+    supersample: int = option(1, "render at this many times the image side, then average down", min=1, max=8)
     half_range: int = option(3, "pitch and yaw range: +-half_range steps of pi/16; start grid (2n+1)^2", min=1, max=7)
     goal_image: int = option(192, "image side, px, the perceptual goal is computed on", min=64, max=512)
-    goal_turn: float = option(math.pi / 64, "turn between the two views of the goal score, rad", min=0.001, max=0.3)
-    keypoints: int = option(300, "ORB keypoints per view for the goal score", min=20, max=2000)
-    distance: float = option(3.0, "camera distance from the box centre (box side 1)", min=1.5, max=20.0)
-    fov: float = option(30.0, "camera field of view, degrees", min=5.0, max=120.0)
+    goal_turn: float = option(math.pi / 32, "turn between the two views of the goal score, rad", min=0.001, max=0.3)
+    keypoints: int = option(500, "ORB keypoints per view for the goal score", min=20, max=2000)
+    distance: float = option(6.0, "camera distance from the box centre (box side 1)", min=1.5, max=20.0)
+    fov: float = option(15.0, "camera field of view, degrees", min=5.0, max=120.0)
+    goal: tuple[int, int] | None = option(
+        None, "goal pose, pitch,yaw in steps of pi/16 (none: the perceptual goal, the largest coplanar spread)"
+    )
     max_episode_steps: int = option(50, "actions after which an episode ends without the goal", min=1)
 
 
@@ -101,24 +105,6 @@ def _box_mesh(half: float = 0.5) -> tuple[list[list[float]], list[int], list[lis
     return verts, idx, uvs, normals
 
 
-def peak(poses: np.ndarray, scores: np.ndarray) -> tuple[int, int]:
-    """The lattice pose nearest the maximum of a quadratic surface fitted (least squares) to the
-    scores: the top of the gradient of Fig 6.1b. The score of one pose is noisy (which features ORB
-    keeps changes from view to view, while a face turned by pi/16 shrinks by only 2 %), so the
-    maximum of the fitted surface is the goal, not the largest single score; when the fit has no
-    maximum (not concave) the largest score is."""
-    x, y = poses[:, 0].astype(np.float64), poses[:, 1].astype(np.float64)
-    A = np.c_[np.ones_like(x), x, y, x * x, x * y, y * y]
-    c = np.linalg.lstsq(A, scores, rcond=None)[0]
-    H = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
-    if np.all(np.linalg.eigvalsh(H) < 0):
-        top = np.linalg.solve(H, -c[1:3])
-        i = int(np.argmin(np.linalg.norm(poses - top, axis=1)))
-    else:
-        i = int(np.argmax(scores))
-    return int(poses[i, 0]), int(poses[i, 1])
-
-
 class ObjectPoseWorld(World):
     """A textured box turned in pitch and yaw by +-pi/16: the camera image in, 4 turns out.
 
@@ -155,6 +141,10 @@ class ObjectPoseWorld(World):
         self.pose = (0, 0)
         self.t = 0
         self._goal: tuple[int, int] | None = None
+        if prm.goal is not None:
+            if max(abs(prm.goal[0]), abs(prm.goal[1])) > n:
+                raise ParamError(f"objectpose: goal {prm.goal} is outside the range +-{n}")
+            self._goal = (int(prm.goal[0]), int(prm.goal[1]))
         self._frame: np.ndarray | None = None
         self._views: dict[tuple[int, int], np.ndarray] = {}
         self._c = BulletClient(connection_mode=p.DIRECT)
@@ -185,7 +175,7 @@ class ObjectPoseWorld(World):
             self._view,
             self._proj,
             shadow=0,
-            lightDirection=[self.params.distance, 0.5, 1.0],  # from the front (the camera's side)
+            lightDirection=[1.0, 0.0, 0.0],  # from the front (the camera's side)
             renderer=p.ER_TINY_RENDERER,
             flags=p.ER_NO_SEGMENTATION_MASK,
         )
@@ -213,9 +203,10 @@ class ObjectPoseWorld(World):
             prm = self.params
             pitch, yaw = pose[0] * STEP, pose[1] * STEP
             first = self.render(pitch, yaw, prm.goal_image)
-            second = self.render(pitch + prm.goal_turn, yaw + prm.goal_turn, prm.goal_image)
+            d = prm.goal_turn
+            second = [self.render(pitch + d, yaw + d, prm.goal_image), self.render(pitch - d, yaw - d, prm.goal_image)]
             with threadpool_limits(1):  # small SVDs in RANSAC: BLAS threads only add overhead
-                cache[pose] = coplanar_spread(first, second, seed=0, n_keypoints=prm.keypoints).spread
+                cache[pose] = coplanar_spread(first, second, seed=0, n_keypoints=prm.keypoints, residual=1.5).spread
         return cache[pose]
 
     def scores(self) -> np.ndarray:
@@ -224,9 +215,10 @@ class ObjectPoseWorld(World):
 
     @property
     def goal(self) -> tuple[int, int]:
-        """The lattice pose where the coplanar spread peaks (computed on first use): see `peak`."""
+        """The lattice pose where the coplanar spread is largest (computed on first use), unless the
+        `goal` parameter names one."""
         if self._goal is None:
-            self._goal = peak(np.array(self.poses), self.scores())
+            self._goal = self.poses[int(np.argmax(self.scores()))]
         return self._goal
 
     # World interface ---------------------------------------------------------------------------
@@ -284,4 +276,4 @@ class ObjectPoseWorld(World):
         self._c = None
 
 
-__all__ = ["ObjectPoseWorld", "ObjectPoseWorldParams", "STEP", "peak"]
+__all__ = ["ObjectPoseWorld", "ObjectPoseWorldParams", "STEP"]

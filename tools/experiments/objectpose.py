@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from sensorimotor.agent.embedding import procrustes_error
+from sensorimotor.agent.embedding import classical_mds, procrustes_error
 from sensorimotor.agent.learners.lspi import LSPI
 from sensorimotor.agent.programs.generic import GenericProgram
 from sensorimotor.tools.inprocess import run_inprocess
@@ -72,7 +72,8 @@ class Peers:
     pca_coordinates: np.ndarray
     isomap_coordinates: np.ndarray
     pca_scree: list[float]  # explained variance, normalised to sum 1 over the first 10
-    isomap_scree: list[float]  # kernel eigenvalues, same normalisation
+    isomap_scree: list[float]  # eigenvalues of the geodesic distances' MDS, same normalisation
+    isomap_errors: dict[int, float]  # Procrustes error for each neighbourhood size tried
 
 
 def _scree(values: np.ndarray, k: int = 10) -> list[float]:
@@ -90,14 +91,17 @@ def peers(images: np.ndarray, truth: np.ndarray, neighbours: tuple[int, ...] = (
     pca = PCA(n_components=min(10, *X.shape)).fit(X)
     pca_xy = pca.transform(X)[:, :2]
     best: tuple[float, int, np.ndarray, np.ndarray] | None = None
+    errors: dict[int, float] = {}
     for k in neighbours:
         if k >= X.shape[0]:
             continue
-        iso = Isomap(n_neighbors=k, n_components=min(10, X.shape[0] - 1))
+        iso = Isomap(n_neighbors=k, n_components=2)
         xy = iso.fit_transform(X)
-        err = procrustes_error(truth, xy[:, :2])
+        err = procrustes_error(truth, xy)
+        errors[k] = err
         if best is None or err < best[0]:
-            best = (err, k, xy[:, :2], iso.kernel_pca_.eigenvalues_)
+            # the scree of the geodesic distances, by the same classical MDS as the sensorimotor embedding
+            best = (err, k, xy, classical_mds(iso.dist_matrix_, 2).eigenvalues)
     if best is None:
         raise ValueError(f"{X.shape[0]} images: too few for Isomap with {neighbours} neighbours")
     return Peers(
@@ -108,6 +112,7 @@ def peers(images: np.ndarray, truth: np.ndarray, neighbours: tuple[int, ...] = (
         best[2],
         _scree(pca.explained_variance_),
         _scree(best[3]),
+        errors,
     )
 
 
@@ -210,12 +215,18 @@ def alignment(
 # --- one seed, and the chapter -------------------------------------------------------------------
 
 
-def job(seed: int, half_range: int, embeddings: int, steps: int, align_iterations: int) -> dict[str, Any]:
-    """Everything of one seed: the embedding run, the peers and the alignment task."""
-    with ObjectPoseWorld(seed=seed, half_range=half_range) as world:
+def job(
+    seed: int, half_range: int, embeddings: int, steps: int, align_iterations: int, samples: int
+) -> dict[str, Any]:
+    """Everything of one seed: the embedding run (one LSPI iteration per embedding, `samples` new
+    random-action samples before each), the peers and the alignment task. One BLAS thread: the
+    matrices are small and worker processes already share the cores."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1), ObjectPoseWorld(seed=seed, half_range=half_range) as world:
         truth = world.truth().tensors["positions"]
         goal = world.goal
-        run = embed(world, seed, embeddings, steps)
+        run = embed(world, seed, embeddings, steps, samples_per_iteration=samples, lspi_iterations=1)
         images = np.array([world.observe(q) for q in world.poses])
         pe = peers(images, truth)
         al = alignment(world, run.coordinates, seed, iterations=align_iterations)
@@ -233,6 +244,7 @@ def job(seed: int, half_range: int, embeddings: int, steps: int, align_iteration
         "pca_error": pe.pca_error,
         "isomap_error": pe.isomap_error,
         "isomap_neighbours": pe.isomap_neighbours,
+        "isomap_errors": {str(k): v for k, v in pe.isomap_errors.items()},
         "pca_scree": pe.pca_scree,
         "isomap_scree": pe.isomap_scree,
         "pca_coordinates": pe.pca_coordinates.tolist(),
@@ -327,8 +339,8 @@ def chapter(runs: int, quick: bool, workers: int, out: str) -> dict[str, Any]:
     over seeds), Fig 6.2, 6.3 and 6.4."""
     from sensorimotor.tools.reproduce import _ci95, _pool_map
 
-    half_range, embeddings, steps = (2, 6, 8_000) if quick else (3, 12, 30_000)
-    res = _pool_map(job, [(s, half_range, embeddings, steps, 5) for s in range(runs)], workers)
+    half_range, embeddings, steps, samples = (2, 10, 8_000, 100) if quick else (3, 15, 30_000, 200)
+    res = _pool_map(job, [(s, half_range, embeddings, steps, 5, samples) for s in range(runs)], workers)
     for r in res:
         r["se_scree"] = _normalised(r["eigenvalues"])
     se = _ci95([r["final_error"] for r in res])
