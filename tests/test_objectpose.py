@@ -78,8 +78,7 @@ def runs(world):
     """Ten embeddings per seed, one LSPI iteration after each 100 new random-action samples."""
     with threadpool_limits(1):  # small matrices: BLAS threads only add overhead on a shared machine
         return {
-            s: embed(world, s, embeddings=10, steps=8_000, samples_per_iteration=100, lspi_iterations=1)
-            for s in SEEDS
+            s: embed(world, s, embeddings=10, steps=8_000, samples_per_iteration=100, lspi_iterations=1) for s in SEEDS
         }
 
 

@@ -39,7 +39,9 @@ class CoplanarSpread:
 
 
 def _orb(img: np.ndarray, n_keypoints: int) -> tuple[np.ndarray, np.ndarray]:
-    orb = ORB(n_keypoints=n_keypoints, fast_threshold=0.05, n_scales=1)  # one scale: precise positions; the views differ little
+    orb = ORB(
+        n_keypoints=n_keypoints, fast_threshold=0.05, n_scales=1
+    )  # one scale: precise positions; the views differ little
     try:
         orb.detect_and_extract(img)
     except (RuntimeError, ValueError, IndexError):  # a blank or tiny image has no keypoints

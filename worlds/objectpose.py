@@ -46,7 +46,9 @@ FACES = ("immunohistochemistry", "coffee", "chelsea", "rocket", "astronaut", "ca
 class ObjectPoseWorldParams:
     """Parameters of the object-pose world (ch. 6)."""
 
-    image: int = option(100, "observed camera image side, px (grey; 100: the 10,000 dimensions of Fig 6.5)", min=8, max=128)
+    image: int = option(
+        100, "observed camera image side, px (grey; 100: the 10,000 dimensions of Fig 6.5)", min=8, max=128
+    )
     supersample: int = option(1, "render at this many times the image side, then average down", min=1, max=8)
     half_range: int = option(3, "pitch and yaw range: +-half_range steps of pi/16; start grid (2n+1)^2", min=1, max=7)
     goal_image: int = option(192, "image side, px, the perceptual goal is computed on", min=64, max=512)
@@ -92,7 +94,10 @@ def _box_mesh(half: float = 0.5) -> tuple[list[list[float]], list[int], list[lis
         ((0, 0, 1), (0, 1, 0), (-1, 0, 0)),
         ((0, 0, -1), (0, 1, 0), (1, 0, 0)),
     )
-    verts, idx, uvs, normals = [], [], [], []
+    verts: list[list[float]] = []
+    idx: list[int] = []
+    uvs: list[list[float]] = []
+    normals: list[list[float]] = []
     for k, (n, u, v) in enumerate(faces):
         nn, uu, vv = np.array(n, float), np.array(u, float), np.array(v, float)
         r, c = divmod(k, 3)

@@ -215,21 +215,23 @@ def alignment(
 # --- one seed, and the chapter -------------------------------------------------------------------
 
 
-def job(
-    seed: int, half_range: int, embeddings: int, steps: int, align_iterations: int, samples: int
-) -> dict[str, Any]:
+def job(seed: int, half_range: int, embeddings: int, steps: int, align_iterations: int, samples: int) -> dict[str, Any]:
     """Everything of one seed: the embedding run (one LSPI iteration per embedding, `samples` new
     random-action samples before each), the peers and the alignment task. One BLAS thread: the
     matrices are small and worker processes already share the cores."""
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(1), ObjectPoseWorld(seed=seed, half_range=half_range) as world:
-        truth = world.truth().tensors["positions"]
-        goal = world.goal
-        run = embed(world, seed, embeddings, steps, samples_per_iteration=samples, lspi_iterations=1)
-        images = np.array([world.observe(q) for q in world.poses])
-        pe = peers(images, truth)
-        al = alignment(world, run.coordinates, seed, iterations=align_iterations)
+    world = ObjectPoseWorld(seed=seed, half_range=half_range)
+    try:
+        with threadpool_limits(1):
+            truth = world.truth().tensors["positions"]
+            goal = world.goal
+            run = embed(world, seed, embeddings, steps, samples_per_iteration=samples, lspi_iterations=1)
+            images = np.array([world.observe(q) for q in world.poses])
+            pe = peers(images, truth)
+            al = alignment(world, run.coordinates, seed, iterations=align_iterations)
+    finally:
+        world.close()
     return {
         "seed": seed,
         "goal": list(goal),
@@ -283,7 +285,9 @@ def _plot_fig63(out: str, res: list[dict[str, Any]]) -> None:
         ("pca_scree", "PCA", "C1"),
         ("isomap_scree", "Isomap", "C2"),
     ):
-        v = np.mean([np.resize(r[key], 10) if len(r[key]) >= 10 else np.pad(r[key], (0, 10 - len(r[key]))) for r in res], axis=0)
+        v = np.mean(
+            [np.resize(r[key], 10) if len(r[key]) >= 10 else np.pad(r[key], (0, 10 - len(r[key]))) for r in res], axis=0
+        )
         b.plot(k, v, marker="o", color=colour, label=label)
     b.set(xlabel="component", ylabel="eigenvalue / sum of the first 10", title="(b) scree")
     b.legend(fontsize=8)
@@ -297,7 +301,12 @@ def _plot_fig63(out: str, res: list[dict[str, Any]]) -> None:
     for ax, key, title in zip(
         axs,
         ("truth", "pca_coordinates", "isomap_coordinates", "coordinates"),
-        ("(a) truth (pitch, yaw)", "(b) PCA", f"(c) Isomap ({r['isomap_neighbours']} neighbours)", "(d) sensorimotor embedding"),
+        (
+            "(a) truth (pitch, yaw)",
+            "(b) PCA",
+            f"(c) Isomap ({r['isomap_neighbours']} neighbours)",
+            "(d) sensorimotor embedding",
+        ),
         strict=True,
     ):
         xy = np.asarray(r[key])
