@@ -74,12 +74,16 @@ def test_reaching_the_goal_is_rewarded(world):
 
 
 @pytest.fixture(scope="module")
-def runs(world):
-    """Ten embeddings per seed, one LSPI iteration after each 100 new random-action samples."""
-    with threadpool_limits(1):  # small matrices: BLAS threads only add overhead on a shared machine
-        return {
-            s: embed(world, s, embeddings=10, steps=8_000, samples_per_iteration=100, lspi_iterations=1) for s in SEEDS
-        }
+def runs():
+    """Eight embeddings per seed (world and program seeded alike); LSPI iterates (until settled)
+    after each 100 new random-action samples. One BLAS thread: the matrices are small."""
+    out = {}
+    for s in SEEDS:
+        w = ObjectPoseWorld(seed=s, half_range=2, goal=(0, 0), image=48)
+        with threadpool_limits(1):
+            out[s] = embed(w, s, embeddings=8, steps=8_000, samples_per_iteration=100)
+        w.close()
+    return out
 
 
 def test_generic_program_embeds_pose_far_better_than_pca_and_isomap(world, runs):
@@ -91,7 +95,7 @@ def test_generic_program_embeds_pose_far_better_than_pca_and_isomap(world, runs)
     assert final.mean() <= min(pe.pca_error, pe.isomap_error) / 3, (final, pe.pca_error, pe.isomap_error)
     first = np.array([r.errors[0] for r in runs.values()])
     assert first.mean() > 0.3 and np.all(final < first / 5), (first, final)  # the error falls as LSPI iterates
-    assert all(r.lspi_iterations == list(range(1, 11)) for r in runs.values())
+    assert all(np.all(np.diff(r.lspi_iterations) > 0) for r in runs.values())
 
 
 def test_alignment_over_learned_coordinates(world, runs):

@@ -3,7 +3,9 @@ against PCA and Isomap on the same start images (Fig 6.2, 6.3), and the alignmen
 learned coordinates (Fig 6.4). `chapter` is `sme reproduce objectpose`.
 
 - embedding: the generic program (no world-specific code) learns toward the perceptual goal; each
-  of its embeddings is scored by Procrustes against (pitch, yaw): error per LSPI iteration.
+  of its embeddings is scored by Procrustes against (pitch, yaw): error per LSPI iteration (the
+  program iterates LSPI until the weights settle, at most 8 times, after each batch of samples,
+  then embeds: the x axis counts every iteration).
 - peers: PCA and Isomap (scikit-learn, 2 components) of the images seen from the start states,
   scored the same way; scree diagrams of all three.
 - alignment: a target orientation is given as a point of the learned embedding; the state is the
@@ -216,9 +218,9 @@ def alignment(
 
 
 def job(seed: int, half_range: int, embeddings: int, steps: int, align_iterations: int, samples: int) -> dict[str, Any]:
-    """Everything of one seed: the embedding run (one LSPI iteration per embedding, `samples` new
-    random-action samples before each), the peers and the alignment task. One BLAS thread: the
-    matrices are small and worker processes already share the cores."""
+    """Everything of one seed: the embedding run (the generic program with its defaults but
+    `samples` new random-action samples between policy iterations), the peers and the alignment
+    task. One BLAS thread: the matrices are small and worker processes already share the cores."""
     from threadpoolctl import threadpool_limits
 
     world = ObjectPoseWorld(seed=seed, half_range=half_range)
@@ -226,7 +228,7 @@ def job(seed: int, half_range: int, embeddings: int, steps: int, align_iteration
         with threadpool_limits(1):
             truth = world.truth().tensors["positions"]
             goal = world.goal
-            run = embed(world, seed, embeddings, steps, samples_per_iteration=samples, lspi_iterations=1)
+            run = embed(world, seed, embeddings, steps, samples_per_iteration=samples)
             images = np.array([world.observe(q) for q in world.poses])
             pe = peers(images, truth)
             al = alignment(world, run.coordinates, seed, iterations=align_iterations)
@@ -348,7 +350,7 @@ def chapter(runs: int, quick: bool, workers: int, out: str) -> dict[str, Any]:
     over seeds), Fig 6.2, 6.3 and 6.4."""
     from sensorimotor.tools.reproduce import _ci95, _pool_map
 
-    half_range, embeddings, steps, samples = (2, 10, 8_000, 100) if quick else (3, 15, 30_000, 200)
+    half_range, embeddings, steps, samples = (2, 8, 8_000, 100) if quick else (3, 10, 30_000, 200)
     res = _pool_map(job, [(s, half_range, embeddings, steps, 5, samples) for s in range(runs)], workers)
     for r in res:
         r["se_scree"] = _normalised(r["eigenvalues"])
