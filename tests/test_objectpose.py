@@ -100,8 +100,10 @@ def test_generic_program_embeds_pose_far_better_than_pca_and_isomap(world, runs)
 
 def test_alignment_over_learned_coordinates(world, runs):
     """Fig 6.4: >= 95 % of the starts reach a target given in the learned coordinates within 5 LSPI iterations."""
+    targets = set()
     for s, r in runs.items():
         with threadpool_limits(1):
             al = alignment(world, r.coordinates, s, iterations=5)
-        assert al.success[0] < 0.95 or al.target == world.poses.index((0, 0)), al.success  # not solved by chance
         assert al.success[-1] >= 0.95, (s, al.success)
+        targets.add(al.target)
+    assert len(targets) >= 3  # the seeds draw different targets

@@ -10,7 +10,7 @@ learned coordinates (Fig 6.4). `chapter` is `sme reproduce objectpose`.
   scored the same way; scree diagrams of all three.
 - alignment: a target orientation is given as a point of the learned embedding; the state is the
   learned (pitch, yaw) of the current view (the start view it shows), features are Gaussian radial
-  basis functions of those coordinates, reward 1 on reaching the target; LSPI iterates over one
+  basis functions of those coordinates (centred on the learned points), reward 1 on reaching the target; LSPI iterates over one
   batch of random-action samples, and after each iteration the greedy policy is run from every
   start state: the fraction that reaches the target.
 """
@@ -121,31 +121,27 @@ def peers(images: np.ndarray, truth: np.ndarray, neighbours: tuple[int, ...] = (
 # --- the alignment task (Fig 6.4) ----------------------------------------------------------------
 
 
-@dataclass(frozen=True)
 class CoordinateRBF:
-    """LSPI basis over start-state ids: the learned coordinates of the state, through a grid of
-    Gaussian radial basis functions (plus a constant), one block per action."""
+    """LSPI basis over start-state ids: the learned coordinates of the state, through Gaussian
+    radial basis functions centred on the learned points themselves (width: the median distance
+    to the nearest other point; invariant to the embedding's arbitrary rotation), plus a constant,
+    one block per action."""
 
-    coordinates: np.ndarray  # [n_states, 2] learned coordinates
-    n_actions: int
-    per_side: int = 7
+    def __init__(self, coordinates: np.ndarray, n_actions: int, width: float = 1.0) -> None:
+        self.coordinates = np.asarray(coordinates, dtype=np.float64)
+        self.n_actions = n_actions
+        c = self.coordinates
+        d = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=2)
+        d[np.diag_indices_from(d)] = np.inf
+        self.width = width * (float(np.median(d.min(axis=1))) or 1.0)
+        self._f = np.hstack([np.ones((len(c), 1)), np.exp(-0.5 * (d**2) / self.width**2) + np.eye(len(c))])
 
     @property
     def k(self) -> int:
-        return (self.per_side**2 + 1) * self.n_actions
-
-    def features(self, states: np.ndarray) -> np.ndarray:
-        c = self.coordinates
-        lo, hi = c.min(axis=0), c.max(axis=0)
-        axes = [np.linspace(lo[d], hi[d], self.per_side) for d in range(2)]
-        centres = np.array([(x, y) for x in axes[0] for y in axes[1]])
-        width = float(np.mean((hi - lo) / max(1, self.per_side - 1))) or 1.0
-        z = c[np.asarray(states, dtype=np.int64).reshape(-1)]
-        d2 = ((z[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2)
-        return np.hstack([np.ones((z.shape[0], 1)), np.exp(-0.5 * d2 / width**2)])
+        return self._f.shape[1] * self.n_actions
 
     def phi(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        f = self.features(states)
+        f = self._f[np.asarray(states, dtype=np.int64).reshape(-1)]
         a = np.asarray(actions, dtype=np.int64).reshape(-1)
         m = f.shape[1]
         out = np.zeros((f.shape[0], self.k))
