@@ -19,6 +19,7 @@ SMALL = {
     "sme/Retina-v0": {"layers": 2, "fields": 8, "supersample": 1},
     "sme/Vergence-v0": {"n_starts": 3, "fovea": 8},
     "sme/MountainCar-v0": {"n_positions": 3, "n_eval": 0, "fovea": 8, "cache_size": 100},
+    "sme/ObjectPose-v0": {"half_range": 1, "image": 32, "goal": "0,0"},
 }
 
 

@@ -5,10 +5,12 @@ Chapters: `gridworld` (ch. 5: Procrustes error per LSPI iteration, plain and bar
 by the agent itself), `vergence` (ch. 7: LSPI iterations to a perfect vergence policy and the
 1-D depth map, on the PyBullet robot and on the Middlebury stereo pair), `mountaincar` (ch. 8:
 steps-to-goal curves of the staged program on three bodies, against true-state and random agents,
-and a baseline change while driving), `rovingeye` (ch. 5.2: Table 5.1, the five ways of making
-traces, Fig 5.8 scree and Fig 5.11 embeddings) and `chapter9` (beyond the dissertation: probabilistic
-embedding in a slippery gridworld, option discovery, mountain-car policy maps, Isomap and
-state-aided vergence traces). Runs go to worker processes (spawned); results are written to
+and a baseline change while driving), `objectpose` (ch. 6: the generic program's embedding of
+object pose against PCA and Isomap, Fig 6.3, and the alignment task of Fig 6.4), `rovingeye` (ch. 5.2:
+Table 5.1, the five ways of making traces, Fig 5.8 scree and Fig 5.11 embeddings) and `chapter9`
+(beyond the dissertation: probabilistic embedding in a slippery gridworld, option discovery,
+mountain-car policy maps, Isomap and state-aided vergence traces). Runs go to worker processes
+(spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
 
@@ -537,6 +539,12 @@ def rovingeye(runs: int, quick: bool, workers: int, out: str) -> dict:
     return chapter(runs, quick, workers, out)
 
 
+def objectpose(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.objectpose import chapter
+
+    return chapter(runs, quick, workers, out)
+
+
 def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
     from sensorimotor.tools.experiments.chapter9 import chapter9 as run
 
@@ -548,6 +556,7 @@ CHAPTERS = {
     "retina": retina,
     "vergence": vergence,
     "mountaincar": mountaincar,
+    "objectpose": objectpose,
     "rovingeye": rovingeye,
     "chapter9": chapter9,
 }
@@ -556,7 +565,7 @@ CHAPTERS = {
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
-        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, rovingeye, chapter9)",
+        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, objectpose, rovingeye, chapter9)",
         description=__doc__,
     )
     p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")

@@ -36,6 +36,7 @@ GYM_ENVS: dict[str, tuple[str, dict[str, Any]]] = {
     "sme/Vergence-v0": ("vergence", {}),
     "sme/MountainCar-v0": ("mountaincar", {}),
     "sme/RovingEye-v0": ("rovingeye", {}),
+    "sme/ObjectPose-v0": ("objectpose", {}),
 }
 
 

@@ -66,6 +66,9 @@ WORLDS: dict[str, WorldKind] = {
     "rovingeye": WorldKind(
         "roving_eye", "RovingEyeWorld", "RovingEyeParams", "a 128x128 eye over a bundled natural image (ch. 5.2)"
     ),
+    "objectpose": WorldKind(
+        "objectpose", "ObjectPoseWorld", "ObjectPoseWorldParams", "a textured box turned in pitch and yaw (ch. 6)"
+    ),
     "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }
 
