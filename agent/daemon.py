@@ -98,6 +98,9 @@ class AgentDaemon:
     share_every : float or None, default None
         Seconds between checkpoints shared on the bus while another owner is alive (default:
         `checkpoint_every`; None there too: never).
+    workers : tuple of str, default ()
+        The owner ids of this daemon's worker processes (`sme agent --workers N`): its status adds
+        their links and counters, so `sme status --agent ID` shows the whole agent.
 
     Examples
     --------
@@ -123,6 +126,7 @@ class AgentDaemon:
         claim_settle: float = 0.3,
         claim_delay: float = 0.3,
         share_every: float | None = None,
+        workers: tuple[str, ...] = (),
     ) -> None:
         make_detector(detector)  # fail early on an unknown name
         self.detector = detector
@@ -139,6 +143,9 @@ class AgentDaemon:
         self._shared: dict[str, Checkpoint] = {}  # world -> newest checkpoint another owner shared
         self._stopped_at: dict[str, float] = {}  # world -> time.time() this daemon last stopped answering it
         self._last_shed = 0.0
+        self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
+        self.workers = tuple(workers)
+        self._worker_status: dict[str, AgentStatus] = {}
         self.seed = seed
         self.state_dir = state_dir
         self.checkpoint_every = checkpoint_every
@@ -305,7 +312,33 @@ class AgentDaemon:
         counters["dropped"] += sum(ln.dropped for ln in links)
         counters["links"] = len(links)
         counters["owned"] = len(self._claims)
+        if self.workers:
+            mine = {ln.world_id for ln in links if ln.state == "attached"}
+            extra = []
+            for st in list(self._worker_status.values()):
+                extra += [ln for ln in st.links if ln.world_id not in mine and ln.state == "attached"]
+                for k, v in st.counters.items():
+                    counters[k] = counters.get(k, 0) + v
+            seen = {ln.world_id for ln in extra} | mine
+            links = tuple(ln for ln in links if ln.state == "attached" or ln.world_id not in seen) + tuple(extra)
+            counters["links"] = len(links)
+            counters["workers"] = len(self.workers) + 1
         return AgentStatus(self.owner_id, time.time() - self._started, links, counters, time.time())
+
+    def _poll_workers(self) -> None:
+        """Keep the workers' latest statuses (for `status`), every 0.5 s until stopped."""
+        while not self._stop.wait(0.5):
+            for w in self.workers:
+                try:
+                    replies = self.bus.get(keys.agent_status(w), timeout=1.0)
+                    if replies:
+                        self._worker_status[w] = codec.decode(AgentStatus, replies[0].payload)
+                    else:
+                        self._worker_status.pop(w, None)
+                except (BusError, ProtocolError):
+                    self._worker_status.pop(w, None)
+                except Exception:  # noqa: BLE001 - a closed session at shutdown
+                    return
 
     # attach / pause ----------------------------------------------------------------------------
     def _fetch(self, key: str, cls: type, tries: int = 3) -> Any:
@@ -438,8 +471,8 @@ class AgentDaemon:
         if not state_dir:
             return written
         for wid, link in list(self.links.items()):
-            if only is not None and wid != only:
-                continue
+            if (only is not None and wid != only) or wid in self._elsewhere:
+                continue  # another owner answered it since: its file is theirs to write
             path = self._checkpoint_path(state_dir, wid)
             data = self._encoded_state(wid, link)
             if data is None:
@@ -548,15 +581,20 @@ class AgentDaemon:
             claim_delay=self.claim_delay,
             may_shed=now - self._last_shed >= 2.0 and now - self._started_mono >= 2.0,
         )
+        for w in self.links:
+            if view.claimants(w) and self.owner_id not in view.claimants(w):
+                self._elsewhere.add(w)  # another owner answers it now
         for w, why in p.release.items():
             if "wins" in why:
                 self.counters["lost"] += 1
+                self._elsewhere.add(w)
             self._release(w, why)
         if p.shed is not None:
             self._last_shed = now
             self._stop_answering(p.shed, "handed off to balance the load")
             self.share(only=p.shed)
             self._release(p.shed, "handed off to balance the load")
+            self._elsewhere.add(p.shed)
             self._avoid[p.shed] = now + 5.0
             self.counters["shed"] += 1
         for w in p.claim:
@@ -617,6 +655,7 @@ class AgentDaemon:
         if previous is not None and att.link is not previous:
             previous.stop()
         self.links[wid] = att.link
+        self._elsewhere.discard(wid)
         if self.threaded_links:
             att.link.start()
         log.info(
@@ -658,7 +697,7 @@ class AgentDaemon:
                 continue
             if now - since < self.link_ttl or link.state == "attached":
                 continue
-            if self.state_dir and wid not in self.checkpoint(only=wid):
+            if self.state_dir and wid not in self._elsewhere and wid not in self.checkpoint(only=wid):
                 log.warning("world %s: gone %.0f s but its checkpoint failed; link kept", wid, now - since)
                 continue
             if self._gone.pop(wid, None) is None or self.links.get(wid) is not link:
@@ -701,6 +740,8 @@ class AgentDaemon:
         self.bus.watch_alive(keys.ALL_ALIVE_OWNERS, self._on_owner, history=True)
         self.bus.watch_alive(keys.ALL_CLAIMS, self._on_claim, history=True)
         self.bus.watch_alive(keys.ALL_ALIVE_WORLDS, self._on_alive, history=True)
+        if self.workers:
+            threading.Thread(target=self._poll_workers, name="poll-workers", daemon=True).start()
 
     def run(self, seconds: float | None = None) -> None:
         """Process attach/detach until stop() or `seconds` elapse."""

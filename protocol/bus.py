@@ -547,7 +547,15 @@ class Bus:
             If a queryable answered with an error; the message carries its text.
         """
         out = []
-        for reply in self._session.get(key, timeout=timeout, payload=payload):
+        # every matching queryable answers (a wildcard gathers one reply per agent), none consolidated away
+        replies = self._session.get(
+            key,
+            timeout=timeout,
+            payload=payload,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+        )
+        for reply in replies:
             if reply.ok is not None:
                 out.append(_message(reply.ok))
             else:
