@@ -98,6 +98,9 @@ class AgentDaemon:
     share_every : float or None, default None
         Seconds between checkpoints shared on the bus while another owner is alive (default:
         `checkpoint_every`; None there too: never).
+    all_obs : bool, default True
+        Subscribe to every world's observations (those of worlds it does not answer are counted);
+        False: only to the worlds it claims (the workers, so that N workers do not each receive all).
     workers : tuple of str, default ()
         The owner ids of this daemon's worker processes (`sme agent --workers N`): its status adds
         their links and counters, so `sme status --agent ID` shows the whole agent.
@@ -127,6 +130,7 @@ class AgentDaemon:
         claim_delay: float = 0.3,
         share_every: float | None = None,
         workers: tuple[str, ...] = (),
+        all_obs: bool = True,
     ) -> None:
         make_detector(detector)  # fail early on an unknown name
         self.detector = detector
@@ -145,6 +149,8 @@ class AgentDaemon:
         self._last_shed = 0.0
         self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
         self.workers = tuple(workers)
+        self.all_obs = all_obs
+        self._obs_subs: dict[str, Any] = {}  # without all_obs: world -> its observation subscriber
         self._worker_status: dict[str, AgentStatus] = {}
         self.seed = seed
         self.state_dir = state_dir
@@ -535,6 +541,8 @@ class AgentDaemon:
     def _claim(self, wid: str) -> None:
         tok = self.bus.token(claim_key(wid, self.owner_id))
         self._claims[wid] = (tok, time.monotonic())
+        if not self.all_obs and wid not in self._obs_subs:
+            self._obs_subs[wid] = self.bus.subscribe(keys.world_obs(wid), self._on_obs)
         self.counters["claimed"] += 1
         log.info("owner %s claims world %s", self.owner_id, wid)
 
@@ -550,6 +558,9 @@ class AgentDaemon:
         """Stop answering world `wid` (first), then withdraw the claim."""
         self._stop_answering(wid, why)
         held = self._claims.pop(wid, None)
+        sub = self._obs_subs.pop(wid, None)
+        if sub is not None:
+            self.bus.undeclare(sub)
         if held is not None:
             self.bus.undeclare(held[0])
             log.info("owner %s releases world %s: %s", self.owner_id, wid, why)
@@ -731,7 +742,8 @@ class AgentDaemon:
     def start(self) -> None:
         """Declare the status queryable and liveliness token, subscribe, and watch for worlds."""
         self.bus.queryable(keys.agent_status(self.owner_id), self._status, codec.schema_name(AgentStatus))
-        self.bus.subscribe(keys.ALL_OBS, self._on_obs)
+        if self.all_obs:
+            self.bus.subscribe(keys.ALL_OBS, self._on_obs)
         self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
         self.bus.subscribe(keys.ALL_WORLD_EVENTS, self._on_world_event)
         self.bus.subscribe(keys.ALL_CHECKPOINTS, self._on_checkpoint)

@@ -95,6 +95,12 @@ def test_two_agents_share_four_worlds_then_one_is_killed_and_the_other_resumes_i
     assert all(len(o) == 1 for o in owners.values()), owners
     of_a = sorted(w for w in worlds if owners[w] == {"a"})
     assert len(of_a) == 2, owners
+    # `sme status` without --agent: both agents, who owns what, nothing unowned
+    st = procs.start("status", "--json", "--connect", e2)
+    out, _ = st.communicate(timeout=60)
+    bus = json.loads(out)
+    assert [d["agent"] for d in bus["agents"]] == ["a", "b"] and bus["unowned"] == [], bus
+    assert bus["owners"] == {w: sorted(owners[w]) for w in worlds}, bus
     last_before = {w: good(w, "a")[-1]["procrustes_error"] for w in of_a}
     time.sleep(1.5)  # a shared checkpoint after the last embedding seen
     last_before = {w: good(w, "a")[-1]["procrustes_error"] for w in of_a}

@@ -208,6 +208,7 @@ def run_agent(args: argparse.Namespace) -> int:
             owner_id=owner_id,
             claim_settle=args.claim_settle,
             workers=tuple(f"{args.id}.w{k}" for k in range(1, workers)),
+            all_obs=args.owner_id is None,  # a worker hears only the worlds it claims
         )
         stop = threading.Event()
 
