@@ -237,6 +237,8 @@ def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
         cfg = replace(cfg, config_file=args.config)
     if cfg.mode != "client":
         cfg = replace(cfg, retry=False)
+    elif args.listen is None:
+        cfg = replace(cfg, listen=())  # a client listens on nothing unless told (not the role's router default)
     return replace(cfg, multicast_scouting=bool(args.multicast_scouting and not args.no_multicast_scouting))
 
 
