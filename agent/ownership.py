@@ -78,7 +78,7 @@ class OwnerBook:
     def claimed_by_other(self, world: str, me: str) -> bool:
         """Whether an owner other than `me` claims `world` (lock-free read: for the hot path)."""
         c = self._claims.get(world)
-        return bool(c) and (me not in c or len(c) > 1)
+        return c is not None and bool(c) and (me not in c or len(c) > 1)
 
     def view(self) -> View:
         """A consistent snapshot."""

@@ -115,7 +115,7 @@ def test_three_hosts_failover_and_partition(hosts, tmp_path):
     ea = [f"tcp/10.231.1.1:{PORT}", f"tcp/10.231.3.1:{PORT}"]  # A's router, seen from C and from B
     eb = f"tcp/10.231.2.1:{PORT}"  # B's router, seen from C
     lease = tmp_path / "lease.json5"  # a cut link is noticed within ~3 s instead of zenoh's 10 s
-    lease.write_text('{transport: {link: {tx: {lease: 3000, keep_alive: 4}}}}')
+    lease.write_text("{transport: {link: {tx: {lease: 3000, keep_alive: 4}}}}")
     cfg = ("--config", str(lease))
     router = f"""
 import time
@@ -142,8 +142,19 @@ with Bus(BusConfig(mode="router", connect=(), listen=("tcp/127.0.0.1:{PORT}", "{
     worlds = ("g1", "g2")
     ws = [
         hosts.start(
-            "C", "world", "gridworld", "--id", w, "--connect", ea[0], "--connect", eb, "--stats-json",
-            str(tmp_path / f"{w}.json"), *cfg, log=tmp_path / f"{w}.log",
+            "C",
+            "world",
+            "gridworld",
+            "--id",
+            w,
+            "--connect",
+            ea[0],
+            "--connect",
+            eb,
+            "--stats-json",
+            str(tmp_path / f"{w}.json"),
+            *cfg,
+            log=tmp_path / f"{w}.log",
         )  # fmt: skip
         for w in worlds
     ]

@@ -82,14 +82,28 @@ def _wait(pred: Any, timeout: float) -> Any:
     return pred()
 
 
-def serve_worlds(ep: str, n: int, seconds: float, obs_bytes: int, tmp: str, connect: tuple[str, ...] = ()) -> list[dict]:
+def serve_worlds(
+    ep: str, n: int, seconds: float, obs_bytes: int, tmp: str, connect: tuple[str, ...] = ()
+) -> list[dict]:
     """Run `n` bench worlds for `seconds` at once; their --stats-json summaries."""
     files = [os.path.join(tmp, f"w{n}_{k}.json") for k in range(n)]
     eps = [a for e in (connect or (ep,)) for a in ("--connect", e)]
     procs = [
         _sme(
-            "world", "bench", "--id", f"b{k}", "--seconds", str(seconds), "--warmup", "300",
-            "--param", f"obs_bytes={obs_bytes}", "--stats-json", f, *eps, "-q",
+            "world",
+            "bench",
+            "--id",
+            f"b{k}",
+            "--seconds",
+            str(seconds),
+            "--warmup",
+            "300",
+            "--param",
+            f"obs_bytes={obs_bytes}",
+            "--stats-json",
+            f,
+            *eps,
+            "-q",
         )  # fmt: skip
         for k, f in enumerate(files)
     ]
@@ -224,7 +238,9 @@ def failover(obs_bytes: int) -> dict:
 
         def answered() -> bool:
             st = _status(e2, "b")
-            return bool(st) and all(
+            if st is None:
+                return False
+            return all(
                 any(ln.world_id == w and ln.state == "attached" and ln.steps > 0 for ln in st.links) for w in mine
             )
 
@@ -264,7 +280,9 @@ def main_args(args: argparse.Namespace) -> int:
     one = by.get((1, 1))
     summary: dict[str, Any] = {"bench": "scale-summary", "workers": args.workers}
     if (1, top) in by and (args.workers, top) in by:
-        summary[f"speedup_at_{top}_worlds"] = round(by[(args.workers, top)]["steps_per_s"] / by[(1, top)]["steps_per_s"], 2)
+        summary[f"speedup_at_{top}_worlds"] = round(
+            by[(args.workers, top)]["steps_per_s"] / by[(1, top)]["steps_per_s"], 2
+        )
     if one is not None:
         summary["single_world_steps_per_s"] = one["steps_per_s"]
         summary["single_world_over_pingpong"] = round(one["steps_per_s"] / max(base["round_trips_per_s"], 1e-9), 2)
