@@ -133,3 +133,32 @@ def test_two_agents_share_four_worlds_then_one_is_killed_and_the_other_resumes_i
         # may be unanswered when the world stops), no answer by a second agent
         assert s["steps"] <= s["actions_received"] <= s["steps"] + s["resends"] + 1, (w, s)
     assert procs.stop(b) == 0
+
+
+@pytest.mark.integration
+def test_workers_share_the_worlds_of_one_agent(procs, endpoint, tmp_path):
+    agent = procs.start("agent", "--listen", endpoint, "--workers", "2", "-q")
+    assert wait_for(lambda: (st := status(endpoint, "a0.w1")) is not None and st, 90)
+    ws = [
+        procs.start("world", "bench", "--id", w, "--connect", endpoint, "--stats-json", str(tmp_path / w), "-q")
+        for w in ("b1", "b2")
+    ]
+
+    def owners():
+        st = procs.start("status", "--json", "--connect", endpoint)
+        out, _ = st.communicate(timeout=60)
+        return json.loads(out)["owners"] if st.returncode == 0 else {}
+
+    # one world per worker, each answered by its owner only
+    assert wait_for(lambda: sorted(owners().values()) == [["a0"], ["a0.w1"]], 60, every=1.0), owners()
+    agg = status(endpoint, "a0")  # the agent's own status adds its worker's links
+    assert agg.counters["workers"] == 2 and {ln.world_id for ln in agg.links if ln.state == "attached"} == {
+        "b1",
+        "b2",
+    }, agg
+    for p in ws:
+        assert procs.stop(p) == 0
+    for w in ("b1", "b2"):
+        s = json.loads((tmp_path / w).read_text())
+        assert s["steps"] > 100 and s["steps"] <= s["actions_received"] <= s["steps"] + s["resends"] + 1, (w, s)
+    assert procs.stop(agent, timeout=30) == 0

@@ -211,16 +211,20 @@ def run_agent(args: argparse.Namespace) -> int:
             all_obs=args.owner_id is None,  # a worker hears only the worlds it claims
         )
         stop = threading.Event()
+        children: list[subprocess.Popen] = []
 
         def on_signal(signum, frame):  # noqa: ARG001
             daemon.stop()
             stop.set()
+            for c in children:  # the workers stop at the same time as this process
+                if c.poll() is None:
+                    c.send_signal(signal.SIGINT)
 
         signal.signal(signal.SIGINT, on_signal)
         signal.signal(signal.SIGTERM, on_signal)
         if args.parent_pid is not None:
             threading.Thread(target=_watch_parent, args=(args.parent_pid, daemon), daemon=True).start()
-        children = [subprocess.Popen(_worker_argv(args, k, str(endpoint))) for k in range(1, workers)]
+        children += [subprocess.Popen(_worker_argv(args, k, str(endpoint))) for k in range(1, workers)]
         try:
             with daemon:
                 who = args.id if owner_id == args.id else f"{args.id} worker {owner_id}"
