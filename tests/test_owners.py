@@ -67,7 +67,7 @@ def test_owner_book_follows_tokens():
 @pytest.mark.integration
 def test_two_agents_share_four_worlds_then_one_is_killed_and_the_other_resumes_its_worlds(procs, tmp_path):
     e1, e2 = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
-    fast = ("--checkpoint-every", "1", "-q")
+    fast = ("--workers", "1", "--checkpoint-every", "1", "-q")  # one process per agent: the machine is shared
     a = procs.start("agent", "--id", "a", "--listen", e1, *fast)
     b = procs.start("agent", "--id", "b", "--listen", e2, "--connect", e1, *fast)
     assert wait_for(lambda: status(e1, "a") and status(e2, "b"), 40)
@@ -88,7 +88,7 @@ def test_two_agents_share_four_worlds_then_one_is_killed_and_the_other_resumes_i
         return [r for r in embeddings() if r["world"] == w and (agent is None or r["agent"] == agent)]
 
     # every world reaches a good embedding, each from one agent, two worlds per agent
-    assert wait_for(lambda: all(any(r["procrustes_error"] < 0.05 for r in good(w)) for w in worlds), 120), [
+    assert wait_for(lambda: all(any(r["procrustes_error"] < 0.05 for r in good(w)) for w in worlds), 240), [
         (r["agent"], r["world"], r["version"], r["procrustes_error"]) for r in embeddings()
     ]
     owners = {w: {r["agent"] for r in good(w)} for w in worlds}
