@@ -99,8 +99,8 @@ class AgentDaemon:
         Seconds between checkpoints shared on the bus while another owner is alive (default:
         `checkpoint_every`; None there too: never).
     all_obs : bool, default True
-        Subscribe to every world's observations (those of worlds it does not answer are counted);
-        False: only to the worlds it claims (the workers, so that N workers do not each receive all).
+        Subscribe to every world's observations, truth and events (those of worlds it does not answer are
+        counted); False: only to the worlds it claims (the workers, so that N workers do not each receive all).
     workers : tuple of str, default ()
         The owner ids of this daemon's worker processes (`sme agent --workers N`): its status adds
         their links and counters, so `sme status --agent ID` shows the whole agent.
@@ -147,10 +147,12 @@ class AgentDaemon:
         self._shared: dict[str, Checkpoint] = {}  # world -> newest checkpoint another owner shared
         self._stopped_at: dict[str, float] = {}  # world -> time.time() this daemon last stopped answering it
         self._last_shed = 0.0
+        self._bad_ids: set[str] = set()  # world tokens whose id is not a valid id
+        self._failed: set[str] = set()  # claimed worlds whose attach failed (until they vanish)
         self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
         self.workers = tuple(workers)
         self.all_obs = all_obs
-        self._obs_subs: dict[str, Any] = {}  # without all_obs: world -> its observation subscriber
+        self._obs_subs: dict[str, list[Any]] = {}  # without all_obs: world -> its obs/truth/event subscribers
         self._worker_status: dict[str, AgentStatus] = {}
         self.seed = seed
         self.state_dir = state_dir
@@ -542,7 +544,11 @@ class AgentDaemon:
         tok = self.bus.token(claim_key(wid, self.owner_id))
         self._claims[wid] = (tok, time.monotonic())
         if not self.all_obs and wid not in self._obs_subs:
-            self._obs_subs[wid] = self.bus.subscribe(keys.world_obs(wid), self._on_obs)
+            self._obs_subs[wid] = [
+                self.bus.subscribe(keys.world_obs(wid), self._on_obs),
+                self.bus.subscribe(keys.world_truth(wid), self._on_truth),
+                self.bus.subscribe(keys.world_event(wid), self._on_world_event),
+            ]
         self.counters["claimed"] += 1
         log.info("owner %s claims world %s", self.owner_id, wid)
 
@@ -558,8 +564,8 @@ class AgentDaemon:
         """Stop answering world `wid` (first), then withdraw the claim."""
         self._stop_answering(wid, why)
         held = self._claims.pop(wid, None)
-        sub = self._obs_subs.pop(wid, None)
-        if sub is not None:
+        self._failed.discard(wid)
+        for sub in self._obs_subs.pop(wid, ()):
             self.bus.undeclare(sub)
         if held is not None:
             self.bus.undeclare(held[0])
@@ -588,7 +594,7 @@ class AgentDaemon:
             self._claims,
             {w: now - t for w, t in self.book.unclaimed_since.items()},
             known=known,
-            avoid=frozenset(self._avoid),
+            avoid=frozenset(self._avoid) | frozenset(self._bad_ids),
             claim_delay=self.claim_delay,
             may_shed=now - self._last_shed >= 2.0 and now - self._started_mono >= 2.0,
         )
@@ -609,6 +615,13 @@ class AgentDaemon:
             self._avoid[p.shed] = now + 5.0
             self.counters["shed"] += 1
         for w in p.claim:
+            try:
+                keys.check_id(w, "world id")
+            except ValueError as e:  # a token no world id can have: never claimed, reported once (lowest owner)
+                self._bad_ids.add(w)
+                if self.owner_id == min(view.owners | {self.owner_id}):
+                    self._attach_failed(w, "no_spec", e)
+                continue
             self._claim(w)
         for w, (_, since) in list(self._claims.items()):
             if now - since < self.claim_settle:
@@ -616,13 +629,14 @@ class AgentDaemon:
             link = self.links.get(w)
             if link is not None and link.state == "attached":
                 continue
-            if any(o < self.owner_id for o in self.book.view().claimants(w)):
-                continue  # withdrawn at the next tick
+            if w in self._failed or any(o < self.owner_id for o in self.book.view().claimants(w)):
+                continue  # tried once this appearance / withdrawn at the next tick
             self._attach(w)
             link = self.links.get(w)
             if link is None or link.state != "attached":
-                self._release(w, "cannot attach")
-                self._avoid[w] = time.monotonic() + 5.0
+                # keep the claim: the world is reported once (attach_failed), not by every owner in turn;
+                # it is tried again when it reappears
+                self._failed.add(w)
 
     def _attach(self, wid: str) -> None:
         self._gone.pop(wid, None)
@@ -744,8 +758,8 @@ class AgentDaemon:
         self.bus.queryable(keys.agent_status(self.owner_id), self._status, codec.schema_name(AgentStatus))
         if self.all_obs:
             self.bus.subscribe(keys.ALL_OBS, self._on_obs)
-        self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
-        self.bus.subscribe(keys.ALL_WORLD_EVENTS, self._on_world_event)
+            self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
+            self.bus.subscribe(keys.ALL_WORLD_EVENTS, self._on_world_event)
         self.bus.subscribe(keys.ALL_CHECKPOINTS, self._on_checkpoint)
         self.bus.token(keys.alive_agent(self.owner_id))
         self.bus.token(keys.alive_owner(self.owner_id))
@@ -769,7 +783,12 @@ class AgentDaemon:
                 wid = None
             if wid is not None and not alive:
                 self._detach(wid)
-            self.own()
+            try:
+                self.own()
+            except Exception:  # noqa: BLE001 - one bad tick must not stop the daemon
+                if self.bus.closed:
+                    break
+                log.exception("ownership tick failed")
             if self.share_every is not None and time.monotonic() - last_share >= self.share_every:
                 self.share()
                 last_share = time.monotonic()
