@@ -127,6 +127,7 @@ def scale_rows(workers: int, counts: list[int], seconds: float, obs_bytes: int) 
     try:
         if not _wait(lambda: len(_owners(ep)) >= workers, 120):
             raise RuntimeError(f"the agent's {workers} workers did not come up")
+        time.sleep(3.0)  # the workers finish starting up (imports) before anything is measured
         with tempfile.TemporaryDirectory() as tmp:
             for n in counts:
                 stats = serve_worlds(ep, n, seconds, obs_bytes, tmp)
