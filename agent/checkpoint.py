@@ -55,6 +55,8 @@ class Checkpoint:
     program_params: dict[str, Any] = field(default_factory=dict)
     program_state: dict[str, Any] = field(default_factory=dict)
     detector_state: dict[str, Any] | None = None
+    saved_at: float = 0.0  # seconds since the epoch when the state was taken (0: unknown); orders shared copies
+    steps: int = 0  # steps the link had answered when the state was taken (informative)
 
     def same_body(self, spec: WorldSpec) -> bool:
         """True when `spec` describes the body this state was learned on (kind, program hint,
@@ -123,6 +125,8 @@ def encode_checkpoint(ckpt: Checkpoint) -> bytes:
         "program_params": _flatten(ckpt.program_params, "program_params", arrays),
         "program_state": _flatten(ckpt.program_state, "program_state", arrays),
         "detector_state": _flatten(ckpt.detector_state, "detector_state", arrays),
+        "saved_at": float(ckpt.saved_at),
+        "steps": int(ckpt.steps),
     }
     text = json.dumps(meta, allow_nan=True, separators=(",", ":")).encode("utf-8")
     buf = io.BytesIO()
@@ -292,7 +296,17 @@ def _checkpoint(
         program_params=_unflatten(_require(meta, "program_params", dict), arrays),
         program_state=_unflatten(_require(meta, "program_state", dict), arrays),
         detector_state=None if detector is None else _unflatten(detector, arrays),
+        saved_at=_optional_number(meta, "saved_at", float),
+        steps=int(_optional_number(meta, "steps", int)),
     )
+
+
+def _optional_number(meta: dict, key: str, kind: type) -> float:
+    """An optional numeric entry (0 when absent: files written before it existed)."""
+    value = meta.get(key, 0)
+    if isinstance(value, bool) or not isinstance(value, int | float) or (kind is int and not isinstance(value, int)):
+        raise CheckpointError(f"the entry {key!r} has the wrong type")
+    return float(value) if kind is float else value
 
 
 def read_checkpoint(path: str) -> Checkpoint:

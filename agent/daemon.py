@@ -7,6 +7,12 @@ again by a daemon started later. A world gone longer than `link_ttl` seconds has
 checkpointed (with `state_dir`) and released from memory, so worlds that come and go do not pile up
 links; if it returns, it is attached again through the normal path (restored from its checkpoint,
 or fresh without a state dir).
+
+One owner per world (see `agent.ownership` and protocol/README.md, "Owners"): the daemon answers a
+world only while it holds the world's claim token and no lower owner id claims it too; several
+daemons (or the workers of one, `owner_id`) share the worlds of a bus by count. Each owner shares
+its worlds' checkpoints on the bus (`sme/v1/agent/{owner}/checkpoint/{world}`); every daemon keeps
+the newest copy of the others', so the survivor of a dead owner resumes its worlds from there.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from sensorimotor.agent.attach import AgentConfig, Restored, attach, program_nam
 from sensorimotor.agent.checkpoint import (
     Checkpoint,
     CheckpointError,
+    decode_checkpoint,
     encode_checkpoint,
     read_checkpoint,
     set_aside_checkpoint,
@@ -30,6 +37,7 @@ from sensorimotor.agent.checkpoint import (
 )
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.link import WorldLink, check_truth
+from sensorimotor.agent.ownership import OwnerBook, claim_key, plan
 from sensorimotor.agent.programs.registry import check_program_params, make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
@@ -48,6 +56,10 @@ from sensorimotor.protocol.messages import (
 from sensorimotor.protocol.params import as_strings, parse
 
 log = logging.getLogger("sme.agent")
+
+
+class _Unrestorable(Exception):
+    """A checkpoint whose state this agent's program cannot take (the message says why)."""
 
 
 class AgentDaemon:
@@ -73,6 +85,26 @@ class AgentDaemon:
         Run each link on its own thread instead of in the bus callback.
     detector : str, default DEFAULT_DETECTOR
         The drop detector of every link (see `agent.detectors.DETECTORS`).
+    link_ttl : float or None, default 600.0
+        Seconds after which the link of a world gone is released (None: never).
+    owner_id : str, optional
+        The id this daemon claims worlds and answers status under (default: `agent_id`); the
+        workers of `sme agent --workers N` are owners ``AGENT.wK`` publishing as agent AGENT.
+    claim_settle : float, default 0.3
+        Seconds a claim is held before the daemon answers the world (a lower claimant seen in that
+        time wins); longer than the bus takes to carry a liveliness token between owners.
+    claim_delay : float, default 0.3
+        Seconds a world must be unclaimed before this daemon claims it (times 1 + its rank among
+        the least-loaded owners; 0 for a world it has a paused link for).
+    share_every : float or None, default None
+        Seconds between checkpoints shared on the bus while another owner is alive (default:
+        `checkpoint_every`; None there too: never).
+    all_obs : bool, default True
+        Subscribe to every world's observations, truth and events (those of worlds it does not answer are
+        counted); False: only to the worlds it claims (the workers, so that N workers do not each receive all).
+    workers : tuple of str, default ()
+        The owner ids of this daemon's worker processes (`sme agent --workers N`): its status adds
+        their links and counters, so `sme status --agent ID` shows the whole agent.
 
     Examples
     --------
@@ -94,12 +126,35 @@ class AgentDaemon:
         threaded_links: bool = False,
         detector: str = DEFAULT_DETECTOR,
         link_ttl: float | None = 600.0,
+        owner_id: str | None = None,
+        claim_settle: float = 0.3,
+        claim_delay: float = 0.3,
+        share_every: float | None = None,
+        workers: tuple[str, ...] = (),
+        all_obs: bool = True,
     ) -> None:
         make_detector(detector)  # fail early on an unknown name
         self.detector = detector
         self.bus = bus
         self.threaded_links = threaded_links
         self.agent_id = keys.check_id(agent_id, "agent id")
+        self.owner_id = keys.check_id(owner_id or agent_id, "owner id")
+        self.claim_settle = claim_settle
+        self.claim_delay = claim_delay
+        self.share_every = checkpoint_every if share_every is None else share_every
+        self.book = OwnerBook()
+        self._claims: dict[str, tuple[Any, float]] = {}  # world -> (claim token, monotonic time declared)
+        self._avoid: dict[str, float] = {}  # world -> monotonic time until which it is not claimed again
+        self._shared: dict[str, Checkpoint] = {}  # world -> newest checkpoint another owner shared
+        self._stopped_at: dict[str, float] = {}  # world -> time.time() this daemon last stopped answering it
+        self._last_shed = 0.0
+        self._bad_ids: set[str] = set()  # world tokens whose id is not a valid id
+        self._failed: set[str] = set()  # claimed worlds whose attach failed (until they vanish)
+        self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
+        self.workers = tuple(workers)
+        self.all_obs = all_obs
+        self._obs_subs: dict[str, list[Any]] = {}  # without all_obs: world -> its obs/truth/event subscribers
+        self._worker_status: dict[str, AgentStatus] = {}
         self.seed = seed
         self.state_dir = state_dir
         self.checkpoint_every = checkpoint_every
@@ -114,6 +169,12 @@ class AgentDaemon:
             "bad_world_event": 0,
             "released": 0,  # links of worlds gone longer than link_ttl, released from memory
             "dropped": 0,  # observations dropped unanswered (flood); here those of released links
+            "others": 0,  # observations of worlds another owner claims (not answered here)
+            "claimed": 0,  # claims declared
+            "lost": 0,  # claims withdrawn for a lower claimant
+            "shed": 0,  # worlds handed off to balance the load
+            "shared": 0,  # checkpoints shared on the bus
+            "taken_over": 0,  # links restored from another owner's shared checkpoint
         }
         if link_ttl is not None and link_ttl <= 0:
             raise ValueError(f"link_ttl must be > 0 seconds (or None: never release), not {link_ttl}")
@@ -122,6 +183,7 @@ class AgentDaemon:
         self._changes: queue.Queue[tuple[str, bool]] = queue.Queue()
         self._stop = threading.Event()
         self._started = time.time()
+        self._started_mono = time.monotonic()
         self._pubs: dict[str, Any] = {}
         self._lock = threading.Lock()
         if state_dir:
@@ -142,6 +204,7 @@ class AgentDaemon:
             keys.world_act(wid),
             keys.agent_embedding(self.agent_id, wid),
             keys.agent_event(self.agent_id, wid),
+            keys.agent_checkpoint(self.owner_id, wid),
         ):
             with self._lock:
                 pub = self._pubs.pop(key, None)
@@ -183,10 +246,39 @@ class AgentDaemon:
             else:
                 link.handle(msg.payload)
             return
-        self.counters["unattached"] += 1
+        if wid not in self._claims and self.book.claimed_by_other(wid, self.owner_id):
+            self.counters["others"] += 1
+        else:
+            self.counters["unattached"] += 1
 
     def _on_alive(self, key: str, alive: bool) -> None:
-        self._changes.put((keys.last_chunk(key), alive))
+        wid = keys.last_chunk(key)
+        self.book.world(wid, alive)
+        self._changes.put((wid, alive))
+
+    def _on_owner(self, key: str, alive: bool) -> None:
+        self.book.owner(keys.last_chunk(key), alive)
+
+    def _on_claim(self, key: str, alive: bool) -> None:
+        self.book.claim(key, alive)
+
+    def _on_checkpoint(self, msg: BusMessage) -> None:
+        """Keep the newest checkpoint another owner shares of each world (decoded: it is checked now)."""
+        parts = msg.key.split("/")
+        owner, wid = parts[-3], parts[-1]
+        if owner == self.owner_id:
+            return
+        try:
+            ckpt = decode_checkpoint(msg.payload)
+        except CheckpointError as e:
+            log.warning("checkpoint shared by %s for world %s refused: %s", owner, wid, e)
+            return
+        if ckpt.world_id != wid:
+            log.warning("checkpoint shared by %s on world %s's key is for world %s: refused", owner, wid, ckpt.world_id)
+            return
+        old = self._shared.get(wid)
+        if old is None or ckpt.saved_at >= old.saved_at:
+            self._shared[wid] = ckpt
 
     # truth and world events for a world without a link are counted as `unattached`, like its
     # observations; a refused one as bad_truth / bad_world_event (the link keeps its truth)
@@ -228,7 +320,34 @@ class AgentDaemon:
         counters = dict(self.counters)
         counters["dropped"] += sum(ln.dropped for ln in links)
         counters["links"] = len(links)
-        return AgentStatus(self.agent_id, time.time() - self._started, links, counters, time.time())
+        counters["owned"] = len(self._claims)
+        if self.workers:
+            mine = {ln.world_id for ln in links if ln.state == "attached"}
+            extra = []
+            for st in list(self._worker_status.values()):
+                extra += [ln for ln in st.links if ln.world_id not in mine and ln.state == "attached"]
+                for k, v in st.counters.items():
+                    counters[k] = counters.get(k, 0) + v
+            seen = {ln.world_id for ln in extra} | mine
+            links = tuple(ln for ln in links if ln.state == "attached" or ln.world_id not in seen) + tuple(extra)
+            counters["links"] = len(links)
+            counters["workers"] = len(self.workers) + 1
+        return AgentStatus(self.owner_id, time.time() - self._started, links, counters, time.time())
+
+    def _poll_workers(self) -> None:
+        """Keep the workers' latest statuses (for `status`), every 0.5 s until stopped."""
+        while not self._stop.wait(0.5):
+            for w in self.workers:
+                try:
+                    replies = self.bus.get(keys.agent_status(w), timeout=1.0)
+                    if replies:
+                        self._worker_status[w] = codec.decode(AgentStatus, replies[0].payload)
+                    else:
+                        self._worker_status.pop(w, None)
+                except (BusError, ProtocolError):
+                    self._worker_status.pop(w, None)
+                except Exception:  # noqa: BLE001 - a closed session at shutdown
+                    return
 
     # attach / pause ----------------------------------------------------------------------------
     def _fetch(self, key: str, cls: type, tries: int = 3) -> Any:
@@ -250,13 +369,68 @@ class AgentDaemon:
     def _checkpoint_path(state_dir: str, wid: str) -> str:
         return os.path.join(state_dir, f"{wid}.ckpt.npz")
 
-    def _load_checkpoint(self, spec: WorldSpec) -> Restored | None:
+    def _load_checkpoint(self, spec: WorldSpec, newer_than: float | None = None) -> Restored | None:
         """The saved link for this world, or None to start fresh: the program rebuilt from its
         class params and restored, its embedding version, and the drop detector restored (None: a
         fresh one). A file that cannot be read or restored is set aside
         as NAME.bad-<UTC time>, one learned on another body (kind, program, sensors, actions) as
         NAME.other-body-<UTC time>: its state cannot serve this world, and left in place it would
-        be overwritten by the next checkpoint. Pickles (the old NAME.pkl) are never loaded."""
+        be overwritten by the next checkpoint. Pickles (the old NAME.pkl) are never loaded.
+
+        A checkpoint another owner shared on the bus is used instead when it is newer than the file
+        (or there is no file); with `newer_than` (a time.time()), only one saved after it is used."""
+        shared = self._shared.get(spec.world_id)
+        if shared is not None and newer_than is not None and shared.saved_at <= newer_than:
+            shared = None
+        if shared is not None and not shared.same_body(spec):
+            log.warning("world %s: the checkpoint shared on the bus is for another body; not used", spec.world_id)
+            shared = None
+        local = self._load_file(spec) if newer_than is None else None
+        if shared is not None and (local is None or shared.saved_at > local[1]):
+            try:
+                restored = self._restore(spec, shared, "shared checkpoint")
+            except _Unrestorable as e:
+                log.warning("world %s: the checkpoint shared on the bus %s", spec.world_id, e)
+                self._shared.pop(spec.world_id, None)
+            else:
+                self.counters["taken_over"] += 1
+                log.info(
+                    "world %s: resuming from the checkpoint shared on the bus (embedding v%d, %d steps, %.1f s old)",
+                    spec.world_id,
+                    shared.version,
+                    shared.steps,
+                    time.time() - shared.saved_at,
+                )
+                return restored
+        return local[0] if local is not None else None
+
+    def _restore(self, spec: WorldSpec, saved: Checkpoint, what: str) -> Restored:
+        """The program (and detector) rebuilt from checkpoint `saved`; _Unrestorable says why not."""
+        try:
+            program = make_program(spec, self.seed, **saved.program_params)
+            if type(program).__name__ != saved.program_class:
+                raise ValueError(f"it holds a {saved.program_class}, this world gets a {type(program).__name__}")
+            wanted = as_strings(parse(type(program.params), self.program_params.get(program_name(spec), {})))
+            if wanted != saved.program_params:
+                log.warning(
+                    "%s of world %s was made with program params %s, not %s: keeping its own (the learned "
+                    "state belongs to them)",
+                    what,
+                    spec.world_id,
+                    saved.program_params,
+                    wanted,
+                )
+            program.restore(saved.program_state)
+            detector = None
+            if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
+                detector = make_detector(self.detector, **program.detector_params)
+                detector.restore(saved.detector_state)
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError, ProtocolError) as e:
+            raise _Unrestorable(f"cannot be restored ({type(e).__name__}: {e})") from None
+        return Restored(program, saved.version, detector)
+
+    def _load_file(self, spec: WorldSpec) -> tuple[Restored, float] | None:
+        """The state dir's checkpoint of this world and when it was saved, or None (see _load_checkpoint)."""
         state_dir = self.state_dir
         if not state_dir:
             return None
@@ -291,27 +465,11 @@ class AgentDaemon:
             )
             return None
         try:
-            program = make_program(spec, self.seed, **saved.program_params)
-            if type(program).__name__ != saved.program_class:
-                raise ValueError(f"it holds a {saved.program_class}, this world gets a {type(program).__name__}")
-            wanted = as_strings(parse(type(program.params), self.program_params.get(program_name(spec), {})))
-            if wanted != saved.program_params:
-                log.warning(
-                    "checkpoint %s was made with program params %s, not %s: keeping its own (the learned "
-                    "state belongs to them)",
-                    path,
-                    saved.program_params,
-                    wanted,
-                )
-            program.restore(saved.program_state)
-            detector = None
-            if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
-                detector = make_detector(self.detector, **program.detector_params)
-                detector.restore(saved.detector_state)
-        except (ValueError, KeyError, TypeError, IndexError, AttributeError, ProtocolError) as e:
-            set_aside("bad", f"cannot be restored ({type(e).__name__}: {e})")
+            restored = self._restore(spec, saved, f"checkpoint {path}")
+        except _Unrestorable as e:
+            set_aside("bad", str(e))
             return None
-        return Restored(program, saved.version, detector)
+        return restored, saved.saved_at
 
     def checkpoint(self, only: str | None = None) -> set[str]:
         """Write every link's learned state (or only world `only`'s) to STATE_DIR/<world>.ckpt.npz
@@ -322,27 +480,11 @@ class AgentDaemon:
         if not state_dir:
             return written
         for wid, link in list(self.links.items()):
-            if only is not None and wid != only:
-                continue
+            if (only is not None and wid != only) or wid in self._elsewhere:
+                continue  # another owner answered it since: its file is theirs to write
             path = self._checkpoint_path(state_dir, wid)
-            with link.lock:  # a consistent snapshot (copies): the file is written while the link runs on
-                program, spec = link.program, link.spec
-                ckpt = Checkpoint(
-                    world_id=wid,
-                    kind=spec.kind,
-                    program=spec.program,
-                    sensors=tuple(spec.sensors),
-                    action_space=spec.action_space,
-                    version=link.version,
-                    program_class=type(program).__name__,
-                    program_params=as_strings(program.params),
-                    program_state=program.state(),
-                    detector_state=link.detector.state() if link.detector is not None else None,
-                )
-            try:
-                data = encode_checkpoint(ckpt)
-            except ValueError:  # a program whose state is not arrays and plain values: a bug, not fatal
-                log.exception("world %s: checkpoint not written", wid)
+            data = self._encoded_state(wid, link)
+            if data is None:
                 continue
             try:
                 write_atomically(path, data)
@@ -350,6 +492,152 @@ class AgentDaemon:
             except OSError as e:  # e.g. a full disk: the previous checkpoint stays, learning goes on
                 log.error("world %s: checkpoint not written (%s); the previous one is kept", wid, e)
         return written
+
+    def _encoded_state(self, wid: str, link: WorldLink) -> bytes | None:
+        """Link `link`'s learned state as checkpoint bytes (None, logged, if it cannot be encoded)."""
+        with link.lock:  # a consistent snapshot (copies): it is written while the link runs on
+            program, spec = link.program, link.spec
+            ckpt = Checkpoint(
+                world_id=wid,
+                kind=spec.kind,
+                program=spec.program,
+                sensors=tuple(spec.sensors),
+                action_space=spec.action_space,
+                version=link.version,
+                program_class=type(program).__name__,
+                program_params=as_strings(program.params),
+                program_state=program.state(),
+                detector_state=link.detector.state() if link.detector is not None else None,
+                saved_at=time.time(),
+                steps=link.counters.steps,
+            )
+        try:
+            return encode_checkpoint(ckpt)
+        except ValueError:  # a program whose state is not arrays and plain values: a bug, not fatal
+            log.exception("world %s: checkpoint not written", wid)
+            return None
+
+    def share(self, only: str | None = None) -> int:
+        """Put the learned state of every world this daemon answers (or only `only`) on the bus, for
+        the other owners to resume from if this one dies; nothing while no other owner is alive.
+        Returns how many were shared."""
+        if not (self.book.view().owners - {self.owner_id}):
+            return 0
+        n = 0
+        for wid, link in list(self.links.items()):
+            if (only is not None and wid != only) or wid not in self._claims:
+                continue
+            if only is None and link.state != "attached":
+                continue
+            data = self._encoded_state(wid, link)
+            if data is None:
+                continue
+            try:
+                self.bus.put(keys.agent_checkpoint(self.owner_id, wid), data, None)
+                n += 1
+            except Exception as e:  # noqa: BLE001 - a closing bus: the next share will do
+                log.warning("world %s: checkpoint not shared: %s", wid, e)
+        self.counters["shared"] += n
+        return n
+
+    # ownership ---------------------------------------------------------------------------------
+    def _claim(self, wid: str) -> None:
+        tok = self.bus.token(claim_key(wid, self.owner_id))
+        self._claims[wid] = (tok, time.monotonic())
+        if not self.all_obs and wid not in self._obs_subs:
+            self._obs_subs[wid] = [
+                self.bus.subscribe(keys.world_obs(wid), self._on_obs),
+                self.bus.subscribe(keys.world_truth(wid), self._on_truth),
+                self.bus.subscribe(keys.world_event(wid), self._on_world_event),
+            ]
+        self.counters["claimed"] += 1
+        log.info("owner %s claims world %s", self.owner_id, wid)
+
+    def _stop_answering(self, wid: str, why: str) -> None:
+        link = self.links.get(wid)
+        if link is not None and link.state == "attached":
+            with link.lock:  # an answer in flight goes out before the claim is withdrawn
+                link.pause()
+            link.event(EventKind.PAUSED, f"no longer answered by {self.owner_id}: {why}", reason="released")
+        self._stopped_at[wid] = time.time()
+
+    def _release(self, wid: str, why: str) -> None:
+        """Stop answering world `wid` (first), then withdraw the claim."""
+        self._stop_answering(wid, why)
+        held = self._claims.pop(wid, None)
+        self._failed.discard(wid)
+        for sub in self._obs_subs.pop(wid, ()):
+            self.bus.undeclare(sub)
+        if held is not None:
+            self.bus.undeclare(held[0])
+            log.info("owner %s releases world %s: %s", self.owner_id, wid, why)
+
+    def own(self) -> None:
+        """One ownership tick: withdraw lost claims, hand one world off if overloaded, claim a free
+        world if least loaded, and attach the worlds whose claim has settled."""
+        now = time.monotonic()
+        view = self.book.view()
+        for w in view.worlds:
+            if view.claimants(w) - {self.owner_id} or w in self._claims:
+                self.book.unclaimed_since.pop(w, None)
+            else:
+                self.book.unclaimed_since.setdefault(w, now)
+        for w in list(self.book.unclaimed_since):
+            if w not in view.worlds:
+                del self.book.unclaimed_since[w]
+        for w, until in list(self._avoid.items()):
+            if until <= now:
+                del self._avoid[w]
+        known = frozenset(w for w, ln in self.links.items() if ln.state != "attached")
+        p = plan(
+            self.owner_id,
+            view,
+            self._claims,
+            {w: now - t for w, t in self.book.unclaimed_since.items()},
+            known=known,
+            avoid=frozenset(self._avoid) | frozenset(self._bad_ids),
+            claim_delay=self.claim_delay,
+            may_shed=now - self._last_shed >= 2.0 and now - self._started_mono >= 2.0,
+        )
+        for w in self.links:
+            if view.claimants(w) and self.owner_id not in view.claimants(w):
+                self._elsewhere.add(w)  # another owner answers it now
+        for w, why in p.release.items():
+            if "wins" in why:
+                self.counters["lost"] += 1
+                self._elsewhere.add(w)
+            self._release(w, why)
+        if p.shed is not None:
+            self._last_shed = now
+            self._stop_answering(p.shed, "handed off to balance the load")
+            self.share(only=p.shed)
+            self._release(p.shed, "handed off to balance the load")
+            self._elsewhere.add(p.shed)
+            self._avoid[p.shed] = now + 5.0
+            self.counters["shed"] += 1
+        for w in p.claim:
+            try:
+                keys.check_id(w, "world id")
+            except ValueError as e:  # a token no world id can have: never claimed, reported once (lowest owner)
+                self._bad_ids.add(w)
+                if self.owner_id == min(view.owners | {self.owner_id}):
+                    self._attach_failed(w, "no_spec", e)
+                continue
+            self._claim(w)
+        for w, (_, since) in list(self._claims.items()):
+            if now - since < self.claim_settle:
+                continue
+            link = self.links.get(w)
+            if link is not None and link.state == "attached":
+                continue
+            if w in self._failed or any(o < self.owner_id for o in self.book.view().claimants(w)):
+                continue  # tried once this appearance / withdrawn at the next tick
+            self._attach(w)
+            link = self.links.get(w)
+            if link is None or link.state != "attached":
+                # keep the claim: the world is reported once (attach_failed), not by every owner in turn;
+                # it is tried again when it reappears
+                self._failed.add(w)
 
     def _attach(self, wid: str) -> None:
         self._gone.pop(wid, None)
@@ -375,7 +663,14 @@ class AgentDaemon:
         except (BusError, ProtocolError):
             truth = None
         previous = self.links.get(wid)
-        restored = None if previous is not None and same_body(previous.spec, spec) else self._load_checkpoint(spec)
+        if previous is not None and same_body(previous.spec, spec):
+            # resume it, unless another owner answered the world since (its shared state is newer)
+            restored = self._load_checkpoint(spec, newer_than=self._stopped_at.get(wid, time.time()))
+            if restored is not None:
+                previous.stop()
+                previous = None
+        else:
+            restored = self._load_checkpoint(spec)
         if truth is not None:
             try:
                 check_truth(truth, wid)
@@ -390,6 +685,7 @@ class AgentDaemon:
         if previous is not None and att.link is not previous:
             previous.stop()
         self.links[wid] = att.link
+        self._elsewhere.discard(wid)
         if self.threaded_links:
             att.link.start()
         log.info(
@@ -431,7 +727,7 @@ class AgentDaemon:
                 continue
             if now - since < self.link_ttl or link.state == "attached":
                 continue
-            if self.state_dir and wid not in self.checkpoint(only=wid):
+            if self.state_dir and wid not in self._elsewhere and wid not in self.checkpoint(only=wid):
                 log.warning("world %s: gone %.0f s but its checkpoint failed; link kept", wid, now - since)
                 continue
             if self._gone.pop(wid, None) is None or self.links.get(wid) is not link:
@@ -464,17 +760,24 @@ class AgentDaemon:
     # main loop ---------------------------------------------------------------------------------
     def start(self) -> None:
         """Declare the status queryable and liveliness token, subscribe, and watch for worlds."""
-        self.bus.queryable(keys.agent_status(self.agent_id), self._status, codec.schema_name(AgentStatus))
-        self.bus.subscribe(keys.ALL_OBS, self._on_obs)
-        self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
-        self.bus.subscribe(keys.ALL_WORLD_EVENTS, self._on_world_event)
-        self.bus.token(keys.alive_agent(self.agent_id))
+        self.bus.queryable(keys.agent_status(self.owner_id), self._status, codec.schema_name(AgentStatus))
+        if self.all_obs:
+            self.bus.subscribe(keys.ALL_OBS, self._on_obs)
+            self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
+            self.bus.subscribe(keys.ALL_WORLD_EVENTS, self._on_world_event)
+        self.bus.subscribe(keys.ALL_CHECKPOINTS, self._on_checkpoint)
+        self.bus.token(keys.alive_agent(self.owner_id))
+        self.bus.token(keys.alive_owner(self.owner_id))
+        self.bus.watch_alive(keys.ALL_ALIVE_OWNERS, self._on_owner, history=True)
+        self.bus.watch_alive(keys.ALL_CLAIMS, self._on_claim, history=True)
         self.bus.watch_alive(keys.ALL_ALIVE_WORLDS, self._on_alive, history=True)
+        if self.workers:
+            threading.Thread(target=self._poll_workers, name="poll-workers", daemon=True).start()
 
     def run(self, seconds: float | None = None) -> None:
         """Process attach/detach until stop() or `seconds` elapse."""
         t0 = time.monotonic()
-        last_ckpt = last_sweep = t0
+        last_ckpt = last_sweep = last_share = t0
         sweep_every = min(1.0, self.link_ttl / 2) if self.link_ttl is not None else None
         while not self._stop.is_set():
             if seconds is not None and time.monotonic() - t0 >= seconds:
@@ -483,11 +786,17 @@ class AgentDaemon:
                 wid, alive = self._changes.get(timeout=0.1)
             except queue.Empty:
                 wid = None
-            if wid is not None:
-                if alive:
-                    self._attach(wid)
-                else:
-                    self._detach(wid)
+            if wid is not None and not alive:
+                self._detach(wid)
+            try:
+                self.own()
+            except Exception:  # noqa: BLE001 - one bad tick must not stop the daemon
+                if self.bus.closed:
+                    break
+                log.exception("ownership tick failed")
+            if self.share_every is not None and time.monotonic() - last_share >= self.share_every:
+                self.share()
+                last_share = time.monotonic()
             if sweep_every is not None and time.monotonic() - last_sweep >= sweep_every:
                 self.release_expired()
                 last_sweep = time.monotonic()
@@ -500,8 +809,14 @@ class AgentDaemon:
         self._stop.set()
 
     def close(self) -> None:
-        """Stop, stop every link and write a final checkpoint."""
+        """Stop, stop every link, withdraw every claim and write a final checkpoint."""
         self._stop.set()
+        try:
+            self.share()  # the others resume from here
+        except Exception as e:  # noqa: BLE001 - a closing bus: stopping goes on
+            log.warning("final share failed: %s", e)
+        for wid in list(self._claims):
+            self._release(wid, "agent stopping")
         for link in list(self.links.values()):
             link.stop()
         try:

@@ -237,6 +237,8 @@ def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
         cfg = replace(cfg, config_file=args.config)
     if cfg.mode != "client":
         cfg = replace(cfg, retry=False)
+    elif args.listen is None:
+        cfg = replace(cfg, listen=())  # a client listens on nothing unless told (not the role's router default)
     return replace(cfg, multicast_scouting=bool(args.multicast_scouting and not args.no_multicast_scouting))
 
 
@@ -547,7 +549,15 @@ class Bus:
             If a queryable answered with an error; the message carries its text.
         """
         out = []
-        for reply in self._session.get(key, timeout=timeout, payload=payload):
+        # every matching queryable answers (a wildcard gathers one reply per agent), none consolidated away
+        replies = self._session.get(
+            key,
+            timeout=timeout,
+            payload=payload,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+        )
+        for reply in replies:
             if reply.ok is not None:
                 out.append(_message(reply.ok))
             else:

@@ -177,6 +177,58 @@ def alive_agent(agent: str) -> str:
     return f"{PREFIX}/alive/agent/{agent}"
 
 
+def alive_owner(owner: str) -> str:
+    """Liveliness-token key of a session that may own worlds (an agent daemon or one of its workers).
+
+    Parameters
+    ----------
+    owner : str
+        The owner id (an agent id, or ``AGENT.wK`` for worker K of agent AGENT).
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
+    return f"{PREFIX}/alive/owner/{owner}"
+
+
+def alive_claim(world: str, owner: str) -> str:
+    """Liveliness-token key of owner `owner`'s claim on world `world` (see protocol/README.md, "Owners").
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+    owner : str
+        The owner id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
+    return f"{PREFIX}/alive/claim/{world}/{owner}"
+
+
+def agent_checkpoint(owner: str, world: str) -> str:
+    """Key of the checkpoints (.npz bytes, see agent/checkpoint.py) owner `owner` shares of world `world`.
+
+    Parameters
+    ----------
+    owner : str
+        The owner id.
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
+    return f"{PREFIX}/agent/{owner}/checkpoint/{world}"
+
+
 def agent_embedding(agent: str, world: str) -> str:
     """Key of the Embedding messages agent `agent` learns from world `world`.
 
@@ -232,6 +284,11 @@ def agent_status(agent: str) -> str:
 ALL = f"{PREFIX}/**"
 ALL_OBS = f"{PREFIX}/world/*/obs"
 ALL_ALIVE_WORLDS = f"{PREFIX}/alive/world/*"
+ALL_ALIVE_OWNERS = f"{PREFIX}/alive/owner/*"
+ALL_ALIVE_AGENTS = f"{PREFIX}/alive/agent/*"
+ALL_CLAIMS = f"{PREFIX}/alive/claim/*/*"
+ALL_CHECKPOINTS = f"{PREFIX}/agent/*/checkpoint/*"
+ALL_STATUS = f"{PREFIX}/agent/*/status"
 ALL_EMBEDDINGS = f"{PREFIX}/agent/*/embedding/*"
 ALL_EVENTS = f"{PREFIX}/agent/*/event/*"
 ALL_WORLD_EVENTS = f"{PREFIX}/world/*/event"

@@ -92,7 +92,13 @@ RECEIVE = ["put", "delete", "reply", "liveliness_token"]
 WORLD_PUTS = [f"{W}/obs", f"{W}/truth", f"{W}/event", f"{W}/image/*"]
 WORLD_SERVES = [f"{W}/spec", f"{W}/truth"]
 WORLD_READS = [f"{W}/act", f"{W}/ctl"]
-AGENT_PUTS = [f"{W}/act", f"{PREFIX}/agent/*/embedding/*", f"{PREFIX}/agent/*/event/*"]
+AGENT_PUTS = [
+    f"{W}/act",
+    f"{PREFIX}/agent/*/embedding/*",
+    f"{PREFIX}/agent/*/event/*",
+    f"{PREFIX}/agent/*/checkpoint/*",
+]
+AGENT_TOKENS = [f"{PREFIX}/alive/agent/*", f"{PREFIX}/alive/owner/*", f"{PREFIX}/alive/claim/*/*"]
 AGENT_SERVES = [f"{PREFIX}/agent/*/status"]
 PERTURB_PUTS = [f"{W}/ctl"]
 
@@ -119,7 +125,7 @@ def acl_rules() -> dict[str, Any]:
         _rule("agent-receives", RECEIVE + ["query"], "egress", [ALL]),
         _rule("agent-puts", ["put", "delete"], "ingress", AGENT_PUTS),
         _rule("agent-serves", ["declare_queryable", "reply"], "ingress", AGENT_SERVES),
-        _rule("agent-token", ["liveliness_token"], "ingress", [f"{PREFIX}/alive/agent/*"]),
+        _rule("agent-token", ["liveliness_token"], "ingress", AGENT_TOKENS),
         # tool: read-only
         _rule("tool-reads", READ, "ingress", [ALL]),
         _rule("tool-receives", RECEIVE, "egress", [ALL]),

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
+import subprocess
 import sys
 import threading
 from typing import Any
@@ -72,6 +74,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--seconds", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)"
     )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="spread this agent's worlds over N processes, each its own zenoh session claiming worlds "
+        f"with the owner protocol (default: the number of cores, here {os.cpu_count() or 1}); this "
+        "process is the router and worker 0, workers 1..N-1 (owner ids ID.w1...) are its clients",
+    )
+    p.add_argument(
+        "--claim-settle",
+        type=float,
+        default=0.3,
+        metavar="S",
+        help="seconds a world's claim is held before answering it (default 0.3; raise it on buses where "
+        "liveliness takes longer to cross, e.g. between hosts)",
+    )
+    p.add_argument("--owner-id", default=None, help=argparse.SUPPRESS)  # a worker: its owner id
+    p.add_argument("--parent-pid", type=int, default=None, help=argparse.SUPPRESS)  # a worker: stop with it
     add_bus_arguments(p, "agent")
     p.set_defaults(func=main_args)
 
@@ -101,6 +122,45 @@ def list_params(name: str) -> int:
     return 0
 
 
+def _worker_endpoint(listen: tuple[str, ...]) -> str | None:
+    """The endpoint a worker on this host connects to: the first listen endpoint (any-address -> loopback)."""
+    for ep in listen:
+        proto, _, rest = ep.partition("/")
+        host, _, port = rest.rpartition(":")
+        if host in ("0.0.0.0", "[::]", "::"):
+            host = "127.0.0.1" if host == "0.0.0.0" else "[::1]"
+        return f"{proto}/{host}:{port}"
+    return None
+
+
+def _worker_argv(args: argparse.Namespace, k: int, endpoint: str) -> list[str]:
+    """The command line of worker `k`: the same agent settings, as a client of this router."""
+    argv = [sys.executable, "-m", "sensorimotor.tools.cli"]
+    argv += ["-v"] * max(0, getattr(args, "verbose", 0) or 0) + (["-q"] if getattr(args, "quiet", False) else [])
+    argv += ["agent", "--id", args.id, "--owner-id", f"{args.id}.w{k}", "--workers", "1"]
+    argv += ["--seed", str(args.seed), "--checkpoint-every", str(args.checkpoint_every)]
+    argv += ["--link-ttl", str(args.link_ttl), "--detector", args.detector, "--claim-settle", str(args.claim_settle)]
+    argv += ["--parent-pid", str(os.getpid()), "--mode", "client", "--connect", endpoint]
+    if args.state_dir:
+        argv += ["--state-dir", args.state_dir]
+    for item in args.program_param or []:
+        argv += ["--program-param", item]
+    if getattr(args, "secure", None):
+        argv += ["--secure", args.secure]
+    if args.seconds is not None:
+        argv += ["--seconds", str(args.seconds)]
+    return argv
+
+
+def _watch_parent(pid: int, daemon: AgentDaemon) -> None:
+    """A worker stops when the agent that started it is gone (even after a kill -9)."""
+    while not daemon._stop.wait(0.5):
+        if os.getppid() != pid:
+            log.warning("worker %s: its agent (pid %d) is gone; stopping", daemon.owner_id, pid)
+            daemon.stop()
+            return
+
+
 def run_agent(args: argparse.Namespace) -> int:
     try:
         program_params = parse_program_params(args.program_param)
@@ -110,7 +170,23 @@ def run_agent(args: argparse.Namespace) -> int:
     if not args.link_ttl > 0:
         print(f"sme agent: --link-ttl must be > 0 seconds, not {args.link_ttl}", file=sys.stderr)
         return 2
+    workers = os.cpu_count() or 1 if args.workers is None else args.workers
+    if workers < 1:
+        print(f"sme agent: --workers must be >= 1, not {args.workers}", file=sys.stderr)
+        return 2
+    if not args.claim_settle >= 0:
+        print(f"sme agent: --claim-settle must be >= 0 seconds, not {args.claim_settle}", file=sys.stderr)
+        return 2
+    try:
+        owner_id = keys.check_id(args.owner_id or args.id, "agent id")
+    except ValueError as e:
+        print(f"sme agent: {e}", file=sys.stderr)
+        return 2
     cfg = bus_config_from_args(args, "agent")
+    endpoint = _worker_endpoint(cfg.listen) if cfg.mode == "router" else None
+    if workers > 1 and endpoint is None:
+        log.warning("--workers %d needs a router that listens (--listen); running one process", workers)
+        workers = 1
     warning = cfg.exposure_warning()
     if warning:
         print(f"sme agent: WARNING: {warning}", file=sys.stderr, flush=True)
@@ -129,19 +205,43 @@ def run_agent(args: argparse.Namespace) -> int:
             detector=args.detector,
             program_params=program_params,
             link_ttl=args.link_ttl,
+            owner_id=owner_id,
+            claim_settle=args.claim_settle,
+            workers=tuple(f"{args.id}.w{k}" for k in range(1, workers)),
+            all_obs=args.owner_id is None,  # a worker hears only the worlds it claims
         )
         stop = threading.Event()
+        children: list[subprocess.Popen] = []
 
         def on_signal(signum, frame):  # noqa: ARG001
             daemon.stop()
             stop.set()
+            for c in children:  # the workers stop at the same time as this process
+                if c.poll() is None:
+                    c.send_signal(signal.SIGINT)
 
         signal.signal(signal.SIGINT, on_signal)
         signal.signal(signal.SIGTERM, on_signal)
-        with daemon:
-            log.info("agent %s up (%s); waiting for worlds", args.id, cfg.describe())
-            daemon.run(args.seconds)
-        log.info("agent %s stopped", args.id)
+        if args.parent_pid is not None:
+            threading.Thread(target=_watch_parent, args=(args.parent_pid, daemon), daemon=True).start()
+        children += [subprocess.Popen(_worker_argv(args, k, str(endpoint))) for k in range(1, workers)]
+        try:
+            with daemon:
+                who = args.id if owner_id == args.id else f"{args.id} worker {owner_id}"
+                more = f", {workers} workers" if workers > 1 else ""
+                log.info("agent %s up (%s%s); waiting for worlds", who, cfg.describe(), more)
+                daemon.run(args.seconds)
+        finally:
+            for c in children:
+                if c.poll() is None:
+                    c.send_signal(signal.SIGINT)
+            for c in children:
+                try:
+                    c.wait(10)
+                except subprocess.TimeoutExpired:
+                    c.kill()
+                    c.wait()
+        log.info("agent %s stopped", args.id if owner_id == args.id else owner_id)
     return 0
 
 

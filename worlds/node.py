@@ -47,6 +47,7 @@ class NodeStats:
     resends: int = 0
     published: int = 0  # observations put on the bus (resends included)
     actions_received: int = 0  # valid actions received (duplicates and stale ones included)
+    actions_ignored: int = 0  # of those, answers to a step already answered or not the one awaited
     rejected: dict[str, int] = field(default_factory=dict)
     controls: int = 0
     latencies: list[float] = field(default_factory=list)
@@ -63,6 +64,7 @@ class NodeStats:
             "resends": self.resends,
             "published": self.published,
             "actions_received": self.actions_received,
+            "actions_ignored": self.actions_ignored,
             "controls": self.controls,
             "rejected": dict(self.rejected),
             "seconds": round(self.seconds, 3),
@@ -92,11 +94,14 @@ class _ActionSlot:
             self.want = step
             self.action = None
 
-    def offer(self, action: Action) -> None:
+    def offer(self, action: Action) -> bool:
+        """Take `action` if it answers the awaited step first; False when it is ignored."""
         with self._cv:
             if action.step == self.want and self.action is None:
                 self.action = action
                 self._cv.notify()
+                return True
+            return False
 
     def wait(self, timeout: float) -> Action | None:
         with self._cv:
@@ -198,7 +203,8 @@ class WorldNode:
             self._reject(e.kind, str(e))
             return
         self.stats.actions_received += 1
-        self._slot.offer(act)
+        if not self._slot.offer(act):
+            self.stats.actions_ignored += 1
 
     def _on_control(self, msg: BusMessage) -> None:
         try:

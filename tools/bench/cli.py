@@ -8,11 +8,11 @@ import argparse
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench",
-        help="benchmarks (loop, embedding, record, detectors, world, fuzz, gap, soak)",
+        help="benchmarks (loop, embedding, record, detectors, world, fuzz, gap, soak, scale)",
         description="Run a benchmark; see its --help.",
     )
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
-    from sensorimotor.tools.bench import detectors, embedding, fuzz, gap, loop, record, soak, world
+    from sensorimotor.tools.bench import detectors, embedding, fuzz, gap, loop, record, scale, soak, world
 
     loop.add_parser(bsub)
     embedding.add_parser(bsub)
@@ -22,4 +22,5 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     fuzz.add_parser(bsub)
     gap.add_parser(bsub)
     soak.add_parser(bsub)
+    scale.add_parser(bsub)
     p.set_defaults(func=lambda a: p.print_help() or 2)

@@ -1,0 +1,167 @@
+"""One owner per world: who may answer a world, decided with liveliness tokens on the bus.
+
+Every session that may answer worlds (an agent daemon, or each worker of one) is an *owner* with a
+liveliness token `sme/v1/alive/owner/{owner}`. Before it answers world W it declares a claim token
+`sme/v1/alive/claim/{W}/{owner}` and waits `settle` seconds; it answers only while it holds the claim
+and sees no claim on W by a lower owner id (plain string order). A loser stops answering first, then
+withdraws its claim. Claims vanish with their session, so the survivors see a dead owner's worlds
+unclaimed and claim them again. Owners share load by count: an owner claims an unclaimed world only
+when it owns no more worlds than the least-loaded live owner, and sheds one world (a hand-off) when
+it owns two more than that one. See protocol/README.md, "Owners", for the contract.
+
+`OwnerBook` is the view of the bus (filled from liveliness callbacks, thread-safe); `plan` is the
+pure decision made from a snapshot of it, once per tick.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from sensorimotor.protocol import keys
+
+
+@dataclass(frozen=True)
+class View:
+    """A snapshot of the bus: worlds alive, owners alive, and each world's claimants."""
+
+    worlds: frozenset[str]
+    owners: frozenset[str]
+    claims: dict[str, frozenset[str]]
+
+    def claimants(self, world: str) -> frozenset[str]:
+        """The owners claiming `world` (empty when nobody does)."""
+        return self.claims.get(world, frozenset())
+
+    def load(self, owner: str) -> int:
+        """How many live worlds `owner` claims."""
+        return sum(1 for w, c in self.claims.items() if owner in c and w in self.worlds)
+
+
+class OwnerBook:
+    """Liveliness seen on the bus: worlds, owners, claims; `unclaimed_since` per world (monotonic s)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._worlds: set[str] = set()
+        self._owners: set[str] = set()
+        self._claims: dict[str, set[str]] = {}
+        self.unclaimed_since: dict[str, float] = {}
+
+    def world(self, world: str, alive: bool) -> None:
+        """A world's token appeared or vanished."""
+        with self._lock:
+            (self._worlds.add if alive else self._worlds.discard)(world)
+
+    def owner(self, owner: str, alive: bool) -> None:
+        """An owner's token appeared or vanished."""
+        with self._lock:
+            (self._owners.add if alive else self._owners.discard)(owner)
+
+    def claim(self, key: str, alive: bool) -> None:
+        """A claim token `.../claim/{world}/{owner}` appeared or vanished."""
+        parts = str(key).split("/")
+        if len(parts) < 2:
+            return
+        world, owner = parts[-2], parts[-1]
+        with self._lock:
+            if alive:
+                self._claims.setdefault(world, set()).add(owner)
+            else:
+                c = self._claims.get(world)
+                if c is not None:
+                    c.discard(owner)
+                    if not c:
+                        del self._claims[world]
+
+    def claimed_by_other(self, world: str, me: str) -> bool:
+        """Whether an owner other than `me` claims `world` (lock-free read: for the hot path)."""
+        c = self._claims.get(world)
+        return c is not None and bool(c) and (me not in c or len(c) > 1)
+
+    def view(self) -> View:
+        """A consistent snapshot."""
+        with self._lock:
+            return View(
+                frozenset(self._worlds),
+                frozenset(self._owners),
+                {w: frozenset(c) for w, c in self._claims.items() if c},
+            )
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What an owner does this tick: withdraw these claims (why), declare these, hand one off."""
+
+    release: dict[str, str] = field(default_factory=dict)
+    claim: tuple[str, ...] = ()
+    shed: str | None = None
+
+
+def plan(
+    me: str,
+    view: View,
+    mine: Iterable[str],
+    unclaimed_for: dict[str, float],
+    *,
+    known: frozenset[str] = frozenset(),
+    avoid: frozenset[str] = frozenset(),
+    claim_delay: float = 0.3,
+    may_shed: bool = False,
+) -> Plan:
+    """The decision of owner `me` from `view`.
+
+    Parameters
+    ----------
+    me : str
+        This owner's id.
+    view : View
+        The bus as seen now (this owner's own claims included once they came back from the bus).
+    mine : iterable of str
+        The worlds this owner holds a claim token for.
+    unclaimed_for : dict
+        Seconds each alive world has been seen without any claimant.
+    known : frozenset of str
+        Worlds this owner has a paused link for: it claims them without waiting `claim_delay` (the
+        previous owner of a returning world gets it back first).
+    avoid : frozenset of str
+        Worlds not to claim now (e.g. an attach just failed).
+    claim_delay : float
+        Seconds a world must have been unclaimed before this owner claims it; multiplied by
+        1 + this owner's rank among the least-loaded owners, so that ties rarely race.
+    may_shed : bool
+        Whether a hand-off is allowed this tick (the caller rate-limits them).
+    """
+    mine = set(mine)
+    release: dict[str, str] = {}
+    for w in sorted(mine):
+        lower = sorted(o for o in view.claimants(w) if o < me)
+        if w not in view.worlds:
+            release[w] = "world gone"
+        elif lower:
+            release[w] = f"{lower[0]} claims it too (the lower owner id wins)"
+    held = mine - set(release)
+    owners = set(view.owners) | {me}
+    loads = {o: view.load(o) for o in owners}
+    loads[me] = len([w for w in held if w in view.worlds])
+    least = min(loads.values())
+    shed = None
+    if may_shed and loads[me] >= least + 2 and held:
+        shed = max(held)  # deterministic: the last in id order
+    claim: tuple[str, ...] = ()
+    if loads[me] <= least and shed is None:
+        tied = sorted(o for o, n in loads.items() if n == least)
+        rank = tied.index(me) if me in tied else len(tied)
+        free = [w for w in sorted(view.worlds) if not view.claimants(w) and w not in mine and w not in avoid]
+        for w in sorted(free, key=lambda w: (w not in known, w)):
+            wait = 0.0 if w in known else claim_delay * (1 + rank)
+            if unclaimed_for.get(w, 0.0) >= wait:
+                claim = (w,)
+                break
+    return Plan(release, claim, shed)
+
+
+def claim_key(world: str, owner: str) -> str:
+    """The claim token's key (checked ids)."""
+    return keys.alive_claim(keys.check_id(world, "world id"), keys.check_id(owner, "owner id"))

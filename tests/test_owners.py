@@ -1,0 +1,164 @@
+"""One owner per world: the claim rules (pure), and two agents sharing four worlds over real zenoh,
+then failing over when one is killed (-9)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+
+import pytest
+
+from sensorimotor.agent.ownership import OwnerBook, View, plan
+from sensorimotor.tools.common import free_port
+from tests.conftest import Lines, wait_for
+from tests.conftest import agent_status as status
+from tests.conftest import world_link as link
+
+
+def view(worlds, owners, claims) -> View:
+    return View(frozenset(worlds), frozenset(owners), {w: frozenset(c) for w, c in claims.items()})
+
+
+def test_lower_owner_id_wins_a_double_claim_and_a_gone_world_is_released():
+    v = view({"g1", "g2"}, {"a", "b"}, {"g1": {"a", "b"}, "g3": {"b"}})
+    p = plan("b", v, {"g1", "g3"}, {})
+    assert set(p.release) == {"g1", "g3"}
+    assert "a claims it too" in p.release["g1"] and p.release["g3"] == "world gone"
+    assert plan("a", v, {"g1"}, {}).release == {}  # the winner keeps it
+
+
+def test_claims_balance_by_count_and_wait_their_turn():
+    v = view({"g1", "g2", "g3"}, {"a", "b"}, {"g1": {"a"}})
+    # a owns one, b none: a defers, b claims the first free world once it waited its delay
+    assert plan("a", v, {"g1"}, {"g2": 5.0, "g3": 5.0}).claim == ()
+    assert plan("b", v, set(), {"g2": 0.1, "g3": 0.1}, claim_delay=0.3).claim == ()
+    assert plan("b", v, set(), {"g2": 0.4, "g3": 0.4}, claim_delay=0.3).claim == ("g2",)
+    # tied owners: the second in id order waits twice as long
+    v0 = view({"g1"}, {"a", "b"}, {})
+    assert plan("a", v0, set(), {"g1": 0.35}, claim_delay=0.3).claim == ("g1",)
+    assert plan("b", v0, set(), {"g1": 0.35}, claim_delay=0.3).claim == ()
+    assert plan("b", v0, set(), {"g1": 0.65}, claim_delay=0.3).claim == ("g1",)
+    # a world this owner had a link for is claimed at once, before the others
+    assert plan("b", view({"g1", "g9"}, {"a", "b"}, {}), set(), {}, known=frozenset({"g9"})).claim == ("g9",)
+
+
+def test_an_overloaded_owner_hands_one_world_off():
+    v = view({"g1", "g2", "g3"}, {"a", "b"}, {"g1": {"a"}, "g2": {"a"}, "g3": {"a"}})
+    assert plan("a", v, {"g1", "g2", "g3"}, {}, may_shed=True).shed == "g3"
+    assert plan("a", v, {"g1", "g2", "g3"}, {}, may_shed=False).shed is None
+    v2 = view({"g1", "g2"}, {"a", "b"}, {"g1": {"a"}, "g2": {"b"}})
+    assert plan("a", v2, {"g1"}, {}, may_shed=True).shed is None
+
+
+def test_owner_book_follows_tokens():
+    b = OwnerBook()
+    b.world("g1", True)
+    b.owner("a", True)
+    b.claim("sme/v1/alive/claim/g1/a", True)
+    b.claim("sme/v1/alive/claim/g1/b", True)
+    assert b.view().claimants("g1") == {"a", "b"} and b.claimed_by_other("g1", "a")
+    b.claim("sme/v1/alive/claim/g1/b", False)
+    assert not b.claimed_by_other("g1", "a") and b.claimed_by_other("g1", "z")
+    b.world("g1", False)
+    assert b.view().load("a") == 0
+
+
+@pytest.mark.integration
+def test_two_agents_share_four_worlds_then_one_is_killed_and_the_other_resumes_its_worlds(procs, tmp_path):
+    e1, e2 = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    fast = ("--workers", "1", "--checkpoint-every", "1", "-q")  # one process per agent: the machine is shared
+    a = procs.start("agent", "--id", "a", "--listen", e1, *fast)
+    b = procs.start("agent", "--id", "b", "--listen", e2, "--connect", e1, *fast)
+    assert wait_for(lambda: status(e1, "a") and status(e2, "b"), 40)
+    watch = procs.start("watch", "--json", "--no-events", "--timeout", "170", "--connect", e2)
+    rows = Lines(watch.stdout)
+    worlds = [f"g{i}" for i in range(1, 5)]
+    ws = {
+        w: procs.start(
+            "world", "gridworld", "--id", w, "--connect", e1, "--connect", e2, "--stats-json", str(tmp_path / w), "-q"
+        )
+        for w in worlds
+    }
+
+    def embeddings():
+        return [json.loads(x) for x in list(rows.lines) if x.startswith("{")]
+
+    def good(w, agent=None):
+        return [r for r in embeddings() if r["world"] == w and (agent is None or r["agent"] == agent)]
+
+    # every world reaches a good embedding, each from one agent, two worlds per agent
+    assert wait_for(lambda: all(any(r["procrustes_error"] < 0.05 for r in good(w)) for w in worlds), 240), [
+        (r["agent"], r["world"], r["version"], r["procrustes_error"]) for r in embeddings()
+    ]
+    owners = {w: {r["agent"] for r in good(w)} for w in worlds}
+    assert all(len(o) == 1 for o in owners.values()), owners
+    of_a = sorted(w for w in worlds if owners[w] == {"a"})
+    assert len(of_a) == 2, owners
+    # `sme status` without --agent: both agents, who owns what, nothing unowned
+    st = procs.start("status", "--json", "--connect", e2)
+    out, _ = st.communicate(timeout=60)
+    bus = json.loads(out)
+    assert [d["agent"] for d in bus["agents"]] == ["a", "b"] and bus["unowned"] == [], bus
+    assert bus["owners"] == {w: sorted(owners[w]) for w in worlds}, bus
+    last_before = {w: good(w, "a")[-1]["procrustes_error"] for w in of_a}
+    time.sleep(1.5)  # a shared checkpoint after the last embedding seen
+    last_before = {w: good(w, "a")[-1]["procrustes_error"] for w in of_a}
+    a.send_signal(signal.SIGKILL)
+    a.wait()
+    killed = time.monotonic()
+
+    def answered_by_b():
+        st = status(e2, "b")
+        return st and all((ln := link(st, w)) is not None and ln.state == "attached" and ln.steps > 0 for w in of_a)
+
+    assert wait_for(answered_by_b, 15, every=0.05)
+    took = time.monotonic() - killed
+    assert took <= 5.0, took
+    st = status(e2, "b")
+    assert st.counters["taken_over"] >= 2, st.counters  # resumed from a's shared checkpoints, not fresh
+    assert wait_for(lambda: all(good(w, "b") for w in of_a), 60)
+    for w in of_a:
+        first_after = good(w, "b")[0]
+        assert first_after["version"] > 1 and first_after["procrustes_error"] <= 1.5 * last_before[w], (
+            w,
+            first_after,
+            last_before[w],
+        )
+    for p in ws.values():
+        assert procs.stop(p) == 0
+    for w in worlds:
+        s = json.loads((tmp_path / w).read_text())
+        # every step answered, and answered once: one answer per observation published (the last one
+        # may be unanswered when the world stops), no answer by a second agent
+        assert s["steps"] <= s["actions_received"] <= s["steps"] + s["resends"] + 1, (w, s)
+    assert procs.stop(b) == 0
+
+
+@pytest.mark.integration
+def test_workers_share_the_worlds_of_one_agent(procs, endpoint, tmp_path):
+    agent = procs.start("agent", "--listen", endpoint, "--workers", "2", "-q")
+    assert wait_for(lambda: (st := status(endpoint, "a0.w1")) is not None and st, 90)
+    ws = [
+        procs.start("world", "bench", "--id", w, "--connect", endpoint, "--stats-json", str(tmp_path / w), "-q")
+        for w in ("b1", "b2")
+    ]
+
+    def owners():
+        st = procs.start("status", "--json", "--connect", endpoint)
+        out, _ = st.communicate(timeout=60)
+        return json.loads(out)["owners"] if st.returncode == 0 else {}
+
+    # one world per worker, each answered by its owner only
+    assert wait_for(lambda: sorted(owners().values()) == [["a0"], ["a0.w1"]], 60, every=1.0), owners()
+    agg = status(endpoint, "a0")  # the agent's own status adds its worker's links
+    assert agg.counters["workers"] == 2 and {ln.world_id for ln in agg.links if ln.state == "attached"} == {
+        "b1",
+        "b2",
+    }, agg
+    for p in ws:
+        assert procs.stop(p) == 0
+    for w in ("b1", "b2"):
+        s = json.loads((tmp_path / w).read_text())
+        assert s["steps"] > 100 and s["steps"] <= s["actions_received"] <= s["steps"] + s["resends"] + 1, (w, s)
+    assert procs.stop(agent, timeout=30) == 0

@@ -1,0 +1,316 @@
+"""`sme bench scale`: aggregate lockstep steps/s and per-world p99 for 1, 2, 4, 8 bench worlds served
+by one agent with `--workers 1` and `--workers N`, in one run; a raw Zenoh ping-pong of the same
+message sizes through the same router as the baseline; and the failover time (kill -9 of one of two
+agents until its worlds are answered again by the other).
+
+Every process is a subprocess on loopback (free ports, no multicast): `sme agent`, `sme world bench`.
+Aggregate steps/s is the sum of each world's steady rate (after its warm-up) over runs of the same
+length started together.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.protocol.messages import Action, AgentStatus, Observation
+from sensorimotor.tools.common import free_port
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "scale",
+        help="steps/s and p99 for 1-8 worlds with 1 and N workers; ping-pong baseline; failover time",
+        description="Serve 1, 2, 4 and 8 bench worlds (separate processes) by one `sme agent --workers 1` "
+        "and by one `sme agent --workers N`; report the aggregate steps/s and each world's round-trip p99; "
+        "a raw zenoh ping-pong of the same message sizes through a router (the baseline); and the failover "
+        "time: two agents, kill -9 of one, seconds until its worlds are answered by the other.",
+    )
+    p.add_argument("--workers", type=int, default=max(2, os.cpu_count() or 1), help="N (default: cores, at least 2)")
+    p.add_argument("--worlds", default="1,2,4,8", help="world counts (default 1,2,4,8)")
+    p.add_argument("--seconds", type=float, default=6.0, help="seconds each world count runs (default 6)")
+    p.add_argument("--obs-bytes", type=int, default=1024, help="observation size in bytes (default 1024)")
+    p.add_argument("--no-failover", action="store_true", help="skip the failover measurement")
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
+    p.set_defaults(func=main_args)
+
+
+def _sme(*args: str, **kw: Any) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "sensorimotor.tools.cli", *args], cwd=ROOT, **kw)
+
+
+def _stop(p: subprocess.Popen, sig: int = signal.SIGINT) -> None:
+    if p.poll() is None:
+        p.send_signal(sig)
+        try:
+            p.wait(15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def _owners(ep: str) -> list[str]:
+    try:
+        with Bus(BusConfig.for_role("tool", ep)) as bus:
+            return bus.alive(keys.ALL_ALIVE_OWNERS, timeout=1.0)
+    except BusError:
+        return []
+
+
+def _wait(pred: Any, timeout: float) -> Any:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        v = pred()
+        if v:
+            return v
+        time.sleep(0.2)
+    return pred()
+
+
+def serve_worlds(
+    ep: str, n: int, seconds: float, obs_bytes: int, tmp: str, connect: tuple[str, ...] = ()
+) -> list[dict]:
+    """Run `n` bench worlds for `seconds` at once; their --stats-json summaries."""
+    files = [os.path.join(tmp, f"w{n}_{k}.json") for k in range(n)]
+    eps = [a for e in (connect or (ep,)) for a in ("--connect", e)]
+    procs = [
+        _sme(
+            "world",
+            "bench",
+            "--id",
+            f"b{k}",
+            "--seconds",
+            str(seconds),
+            "--warmup",
+            "300",
+            "--param",
+            f"obs_bytes={obs_bytes}",
+            "--stats-json",
+            f,
+            *eps,
+            "-q",
+        )  # fmt: skip
+        for k, f in enumerate(files)
+    ]
+    for p in procs:
+        try:
+            p.wait(seconds + 120)
+        except subprocess.TimeoutExpired:
+            _stop(p)
+    out = []
+    for f in files:
+        with open(f) as fh:
+            out.append(json.load(fh))
+    return out
+
+
+def scale_rows(workers: int, counts: list[int], seconds: float, obs_bytes: int) -> list[dict]:
+    """One agent with `workers` workers; a row per world count."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    agent = _sme("agent", "--listen", ep, "--workers", str(workers), "--id", "s", "-q")
+    rows = []
+    try:
+        if not _wait(lambda: len(_owners(ep)) >= workers, 120):
+            raise RuntimeError(f"the agent's {workers} workers did not come up")
+        time.sleep(3.0)  # the workers finish starting up (imports) before anything is measured
+        with tempfile.TemporaryDirectory() as tmp:
+            for n in counts:
+                stats = serve_worlds(ep, n, seconds, obs_bytes, tmp)
+                rates = [s.get("steady_steps_per_s", s["steps_per_s"]) for s in stats]
+                p99 = [s.get("p99_ms") for s in stats]
+                rows.append(
+                    {
+                        "bench": "scale",
+                        "workers": workers,
+                        "worlds": n,
+                        "obs_bytes": obs_bytes,
+                        "steps_per_s": round(float(sum(rates)), 1),
+                        "per_world_steps_per_s": rates,
+                        "p99_ms_max": max((x for x in p99 if x is not None), default=None),
+                        "p99_ms": p99,
+                        "resends": sum(s["resends"] for s in stats),
+                        "actions_ignored": sum(s.get("actions_ignored", 0) for s in stats),
+                    }
+                )
+    finally:
+        _stop(agent)
+    return rows
+
+
+def _pong_side(ep: str, ready: Any, pong_bytes: int) -> None:
+    with Bus(BusConfig.for_role("agent", ep)) as bus:  # a router answering in its callback, as `sme agent`
+        pub = bus.publisher("bench/pong")
+        data = b"\0" * pong_bytes
+        bus.subscribe("bench/ping", lambda m: pub.put(data))
+        ready.set()
+        time.sleep(3600)
+
+
+def pingpong(obs_bytes: int, seconds: float) -> dict:
+    """Raw zenoh round trips with the bench world's message sizes: this process (a client, like a
+    world) puts an observation-sized ping; a router process answers an action-sized pong in its
+    subscriber callback (like `sme agent --workers 1`)."""
+    obs = codec.encode(Observation("b0", 0, 1, 0, {"frame": np.zeros(obs_bytes // 4, np.float32)}, 0.0, False))
+    act = codec.encode(Action("b0", 1, (0.0,)))
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    ctx = mp.get_context("spawn")
+    ready = ctx.Event()
+    peer = ctx.Process(target=_pong_side, args=(ep, ready, len(act)), daemon=True)
+    peer.start()
+    try:
+        ready.wait(60)
+        with Bus(BusConfig.for_role("world", ep)) as bus:
+            got = threading.Event()
+            bus.subscribe("bench/pong", lambda m: got.set())
+            pub = bus.publisher("bench/ping")
+            time.sleep(0.5)
+            lat = []
+            end = time.perf_counter() + seconds
+            while time.perf_counter() < end:
+                got.clear()
+                t = time.perf_counter()
+                pub.put(obs)
+                if not got.wait(1.0):
+                    continue
+                lat.append(time.perf_counter() - t)
+    finally:
+        peer.kill()
+        peer.join()
+    lat_ms = np.asarray(lat[300:] or lat) * 1e3
+    return {
+        "bench": "pingpong",
+        "ping_bytes": len(obs),
+        "pong_bytes": len(act),
+        "round_trips_per_s": round(1e3 / float(lat_ms.mean()), 1) if lat_ms.size else 0.0,
+        "p50_ms": round(float(np.percentile(lat_ms, 50)), 4) if lat_ms.size else None,
+        "p99_ms": round(float(np.percentile(lat_ms, 99)), 4) if lat_ms.size else None,
+    }
+
+
+def _status(ep: str, agent: str) -> AgentStatus | None:
+    try:
+        with Bus(BusConfig.for_role("tool", ep)) as bus:
+            r = bus.get(keys.agent_status(agent), timeout=1.0)
+            return codec.decode(AgentStatus, r[0].payload) if r else None
+    except BusError:
+        return None
+
+
+def failover(obs_bytes: int) -> dict:
+    """Two agents (a, b), two bench worlds connected to both; kill -9 of a; seconds until b answers a's worlds."""
+    e1, e2 = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    common = ("--workers", "1", "--checkpoint-every", "1", "-q")
+    a = _sme("agent", "--id", "a", "--listen", e1, *common)
+    b = _sme("agent", "--id", "b", "--listen", e2, "--connect", e1, *common)
+    worlds: list[subprocess.Popen] = []
+    try:
+        if not _wait(lambda: len(_owners(e2)) >= 2, 120):
+            raise RuntimeError("the two agents did not come up")
+        eps = ("--connect", e1, "--connect", e2)
+        worlds = [
+            _sme("world", "bench", "--id", f"f{k}", "--param", f"obs_bytes={obs_bytes}", *eps, "-q") for k in range(2)
+        ]
+
+        def of_a() -> list[str]:
+            st = _status(e1, "a")
+            return [ln.world_id for ln in st.links if ln.state == "attached" and ln.steps > 0] if st else []
+
+        mine = _wait(of_a, 60)
+        if not mine:
+            raise RuntimeError("agent a answered no world")
+        a.send_signal(signal.SIGKILL)
+        a.wait()
+        t0 = time.monotonic()
+
+        def answered() -> bool:
+            st = _status(e2, "b")
+            if st is None:
+                return False
+            return all(
+                any(ln.world_id == w and ln.state == "attached" and ln.steps > 0 for ln in st.links) for w in mine
+            )
+
+        ok = _wait(answered, 30)
+        took = time.monotonic() - t0
+    finally:
+        for p in (*worlds, b, a):
+            _stop(p)
+    return {"bench": "failover", "worlds_moved": len(mine), "ok": bool(ok), "seconds": round(took, 2)}
+
+
+def main_args(args: argparse.Namespace) -> int:
+    try:
+        counts = [int(x) for x in args.worlds.split(",") if x.strip()]
+    except ValueError:
+        print(f"sme bench scale: --worlds takes counts like 1,2,4,8, not {args.worlds!r}", file=sys.stderr)
+        return 2
+    if not counts or min(counts) < 1 or args.workers < 1 or args.seconds <= 0:
+        print("sme bench scale: --worlds counts, --workers and --seconds must be positive", file=sys.stderr)
+        return 2
+    emit = (lambda r: print(json.dumps(r), flush=True)) if args.json else (lambda r: _print(r))
+    try:
+        base = pingpong(args.obs_bytes, min(args.seconds, 5.0))
+        emit(base)
+        by: dict[tuple[int, int], dict] = {}
+        for w in sorted({1, args.workers}):
+            for r in scale_rows(w, counts, args.seconds, args.obs_bytes):
+                by[(w, r["worlds"])] = r
+                emit(r)
+        fo = None if args.no_failover else failover(args.obs_bytes)
+        if fo is not None:
+            emit(fo)
+    except RuntimeError as e:
+        print(f"sme bench scale: {e}", file=sys.stderr)
+        return 1
+    top = max(counts)
+    one = by.get((1, 1))
+    summary: dict[str, Any] = {"bench": "scale-summary", "workers": args.workers}
+    if (1, top) in by and (args.workers, top) in by:
+        summary[f"speedup_at_{top}_worlds"] = round(
+            by[(args.workers, top)]["steps_per_s"] / by[(1, top)]["steps_per_s"], 2
+        )
+    if one is not None:
+        summary["single_world_steps_per_s"] = one["steps_per_s"]
+        summary["single_world_over_pingpong"] = round(one["steps_per_s"] / max(base["round_trips_per_s"], 1e-9), 2)
+    if fo is not None:
+        summary["failover_seconds"] = fo["seconds"]
+    summary["targets"] = {
+        "speedup_at_8_worlds": 1.6,
+        "single_world_steps_per_s": 2000,
+        "single_world_over_pingpong": 0.6,
+        "failover_seconds": 5.0,
+    }
+    emit(summary)
+    return 0
+
+
+def _print(r: dict) -> None:
+    if r["bench"] == "scale":
+        print(
+            f"workers {r['workers']}  worlds {r['worlds']}  {r['steps_per_s']:>9,.0f} steps/s in total  "
+            f"p99 max {r['p99_ms_max']} ms  resends {r['resends']}"
+        )
+    elif r["bench"] == "pingpong":
+        print(
+            f"raw zenoh ping-pong ({r['ping_bytes']} B / {r['pong_bytes']} B via a router): "
+            f"{r['round_trips_per_s']:,.0f} round trips/s, p50 {r['p50_ms']} ms, p99 {r['p99_ms']} ms"
+        )
+    elif r["bench"] == "failover":
+        print(f"failover: {r['worlds_moved']} worlds answered again after {r['seconds']} s (ok: {r['ok']})")
+    else:
+        print(json.dumps(r))
