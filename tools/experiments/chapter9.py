@@ -246,32 +246,15 @@ OUTCOMES = ("failure", "direct", "rocking")
 def train_mountaincar(seed: int, train_steps: int, tiles: int = 10, n_tilings: int = 8) -> Any:
     """Sarsa(lambda) with tile coding on the true (x, v) for `train_steps` car steps (as ch. 8's
     true-state agent): the trained policy whose behaviour a policy map shows."""
-    from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
-    from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, random_state
-    from sensorimotor.worlds.mountaincar_dynamics import step as car_step
+    from sensorimotor.tools.experiments.mountaincar import true_state_agent, true_state_episode
+    from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams
 
     prm = MountainCarParams()
     rng = np.random.default_rng(seed)
-    coder = TileCoder(
-        np.array([prm.x_min, -prm.v_max]), np.array([prm.x_max, prm.v_max]), tiles=tiles, n_tilings=n_tilings
-    )
-    agent = SarsaLambda(coder, 3, alpha=0.3, gamma=0.99, lam=0.9, epsilon=0.0, seed=seed)
+    agent = true_state_agent(seed, prm, tiles, n_tilings)
     n = 0
     while n < train_steps:
-        x, v = random_state(rng, prm)
-        s = np.array([x, v])
-        agent.begin_episode()
-        a = agent.act(s)
-        for _ in range(1000):
-            x, v, done = car_step(x, v, a - 1, prm)
-            n += 1
-            s2 = np.array([x, v])
-            if done:
-                agent.learn_one(s, a, -1.0, s2, None)
-                break
-            a2 = agent.act(s2)
-            agent.learn_one(s, a, -1.0, s2, a2)
-            s, a = s2, a2
+        n += true_state_episode(agent, rng, prm, 1000)
     return agent
 
 

@@ -85,6 +85,40 @@ def visual(
     return res
 
 
+def true_state_agent(
+    seed: int,
+    prm: MountainCarParams,
+    tiles: int = 10,
+    n_tilings: int = 8,
+    alpha: float = 0.3,
+    gamma: float = 0.99,
+    lam: float = 0.9,
+) -> SarsaLambda:
+    """Sarsa(lambda) over a tile coding of the true (x, v): the agent given the state (ch. 8)."""
+    coder = TileCoder(
+        np.array([prm.x_min, -prm.v_max]), np.array([prm.x_max, prm.v_max]), tiles=tiles, n_tilings=n_tilings
+    )
+    return SarsaLambda(coder, 3, alpha=alpha, gamma=gamma, lam=lam, epsilon=0.0, seed=seed)
+
+
+def true_state_episode(agent: SarsaLambda, rng: np.random.Generator, prm: MountainCarParams, max_car_steps: int) -> int:
+    """One training episode of `agent` from a random state (reward -1 per step); the car steps taken."""
+    x, v = random_state(rng, prm)
+    s = np.array([x, v])
+    agent.begin_episode()
+    a = agent.act(s)
+    for n in range(1, max_car_steps + 1):
+        x, v, done = car_step(x, v, a - 1, prm)
+        s2 = np.array([x, v])
+        if done:
+            agent.learn_one(s, a, -1.0, s2, None)
+            return n
+        a2 = agent.act(s2)
+        agent.learn_one(s, a, -1.0, s2, a2)
+        s, a = s2, a2
+    return max_car_steps
+
+
 def true_state(
     seed: int,
     train_steps: int,
@@ -100,29 +134,13 @@ def true_state(
     """The same Sarsa(lambda) and tile coding, given the true position and velocity."""
     prm = MountainCarParams()
     rng = np.random.default_rng(seed)
-    coder = TileCoder(
-        np.array([prm.x_min, -prm.v_max]), np.array([prm.x_max, prm.v_max]), tiles=tiles, n_tilings=n_tilings
-    )
-    agent = SarsaLambda(coder, 3, alpha=alpha, gamma=gamma, lam=lam, epsilon=0.0, seed=seed)
+    agent = true_state_agent(seed, prm, tiles, n_tilings, alpha, gamma, lam)
     evals = evaluation_states(n_eval)
 
     res = DriveResult([])
     n = 0
     while len(res.curve) < train_steps // eval_every:
-        x, v = random_state(rng, prm)
-        s = np.array([x, v])
-        agent.begin_episode()
-        a = agent.act(s)
-        for _ in range(max_car_steps):
-            x, v, done = car_step(x, v, a - 1, prm)
-            n += 1
-            s2 = np.array([x, v])
-            if done:
-                agent.learn_one(s, a, -1.0, s2, None)
-                break
-            a2 = agent.act(s2)
-            agent.learn_one(s, a, -1.0, s2, a2)
-            s, a = s2, a2
+        n += true_state_episode(agent, rng, prm, max_car_steps)
         if n // eval_every > len(res.curve):
             res.curve.append((n, steps_to_goal(agent.greedy, evals, max_car_steps)))
     return res
