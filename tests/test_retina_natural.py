@@ -37,3 +37,27 @@ def test_learning_improves_saccades_on_a_natural_scene():
     assert (s0, s1) == (0, 1500)
     assert a1.one < 0.7 * a0.one
     assert a1.one < 30.0 and a1.geometry < 25.0
+
+
+class _Swing:
+    """A stand-in policy that swings the eye 10 px right and back: a two-point cycle."""
+
+    def __init__(self, n_fields: int) -> None:
+        self.k = 0
+        self.experience = np.zeros(n_fields)
+        self.positions = np.zeros((n_fields, 2))
+
+    def greedy(self, f: np.ndarray) -> np.ndarray:
+        self.k += 1
+        return np.array([10.0 if self.k % 2 else -10.0, 0.0])
+
+
+def test_a_cycle_of_repeated_saccades_counts_its_closest_point():
+    """Section 4.4.3: a fixed point, "or in rare cases, a cycle - in which case the closest cycle point is counted"."""
+    w = NaturalRetinaWorld(seed=0)
+    program = type("P", (), {"learner": _Swing(w.n)})()
+    acc = N.evaluate(w, program, n=1)  # type: ignore[arg-type]
+    # 1 saccade: 10 px right; 2 saccades: back at the start, a cycle; its closer point is the fixed point
+    assert acc.one != acc.two
+    assert acc.fixed == pytest.approx(min(acc.one, acc.two))
+    assert program.learner.k == 2  # stopped at the cycle, not after MAX_SACCADES
