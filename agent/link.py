@@ -45,7 +45,7 @@ def check_against_spec(obs: Observation, spec: WorldSpec) -> None:
         a = obs.tensors.get(s.name)
         if a is None:
             raise SpecMismatch(f"observation step {obs.step} has no tensor {s.name!r} (spec declares it)")
-        if a.dtype.name != s.dtype or tuple(a.shape) != tuple(s.shape):
+        if codec.dtype_name(a.dtype) != s.dtype or a.shape != tuple(s.shape):
             raise SpecMismatch(
                 f"observation step {obs.step}: tensor {s.name!r} is {a.dtype.name}{list(a.shape)}, "
                 f"spec says {s.dtype}{list(s.shape)}"

@@ -28,6 +28,17 @@ DTYPES: dict[str, np.dtype] = {
     for name in ("uint8", "int8", "uint16", "int16", "int32", "int64", "float32", "float64", "bool")
 }
 
+_DTYPE_NAMES: dict[np.dtype, str] = {}
+
+
+def dtype_name(dt: np.dtype) -> str:
+    """``dt.name``, memoised: numpy computes the name in Python each time (~5 us, on the hot path)."""
+    name = _DTYPE_NAMES.get(dt)
+    if name is None:
+        name = _DTYPE_NAMES[dt] = dt.name
+    return name
+
+
 SCHEMA_NAMES = {
     m.WorldSpec: "sme.v1.WorldSpec",
     m.Observation: "sme.v1.Observation",
@@ -55,7 +66,7 @@ def _finite(value: float, what: str) -> float:
 
 def _tensor_to_pb(name: str, array: np.ndarray, out: pb.Tensor) -> None:
     a = np.asarray(array)
-    dt = a.dtype.name
+    dt = dtype_name(a.dtype)
     if dt not in DTYPES:
         raise errors.BadDtype(f"tensor {name!r}: dtype {dt} is not one of {sorted(DTYPES)}")
     if a.ndim > MAX_DIMS:

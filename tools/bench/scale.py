@@ -5,7 +5,10 @@ agents until its worlds are answered again by the other).
 
 Every process is a subprocess on loopback (free ports, no multicast): `sme agent`, `sme world bench`.
 Aggregate steps/s is the sum of each world's steady rate (after its warm-up) over runs of the same
-length started together.
+length started together. The single-world rate and the ping-pong alternate `--rounds` times (the
+load of a shared machine drifts; the ratio is the median of the rounds'). Each row also says how busy
+the whole machine was (from /proc/stat): when the worlds and the router already keep every core
+busy with one worker, no number of workers can add throughput, and the row shows it.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--worlds", default="1,2,4,8", help="world counts (default 1,2,4,8)")
     p.add_argument("--seconds", type=float, default=6.0, help="seconds each world count runs (default 6)")
     p.add_argument("--obs-bytes", type=int, default=1024, help="observation size in bytes (default 1024)")
+    p.add_argument("--rounds", type=int, default=3, help="ping-pong / single-world alternations (default 3)")
     p.add_argument("--no-failover", action="store_true", help="skip the failover measurement")
     p.add_argument("--json", action="store_true", help="one JSON object per line")
     p.set_defaults(func=main_args)
@@ -80,6 +84,38 @@ def _wait(pred: Any, timeout: float) -> Any:
             return v
         time.sleep(0.2)
     return pred()
+
+
+def _cpu_times() -> tuple[float, float] | None:
+    """(busy, total) jiffies of the whole machine, or None where /proc/stat is missing."""
+    try:
+        with open("/proc/stat") as fh:
+            f = [float(x) for x in fh.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    idle = f[3] + (f[4] if len(f) > 4 else 0.0)
+    return sum(f) - idle, sum(f)
+
+
+def _sample_cpu(out: list, stop: threading.Event, every: float = 0.25) -> None:
+    while True:
+        out.append((time.monotonic(), _cpu_times()))
+        if stop.wait(every):
+            out.append((time.monotonic(), _cpu_times()))
+            return
+
+
+def _busy_mid(samples: list[tuple[float, tuple[float, float] | None]]) -> float | None:
+    """The machine's busy fraction from 50 % to 90 % of the samples' span: the worlds are past
+    their start-up (imports) and not yet stopping."""
+    if len(samples) < 3:
+        return None
+    t0, t1 = samples[0][0], samples[-1][0]
+    a = min(samples, key=lambda x: abs(x[0] - (t0 + 0.5 * (t1 - t0))))[1]
+    b = min(samples, key=lambda x: abs(x[0] - (t0 + 0.9 * (t1 - t0))))[1]
+    if a is None or b is None or b[1] <= a[1]:
+        return None
+    return round((b[0] - a[0]) / (b[1] - a[1]), 3)
 
 
 def serve_worlds(
@@ -119,8 +155,29 @@ def serve_worlds(
     return out
 
 
-def scale_rows(workers: int, counts: list[int], seconds: float, obs_bytes: int) -> list[dict]:
-    """One agent with `workers` workers; a row per world count."""
+def _row(workers: int, n: int, obs_bytes: int, stats: list[dict], busy: float | None) -> dict:
+    rates = [s.get("steady_steps_per_s", s["steps_per_s"]) for s in stats]
+    p99 = [s.get("p99_ms") for s in stats]
+    return {
+        "bench": "scale",
+        "workers": workers,
+        "worlds": n,
+        "obs_bytes": obs_bytes,
+        "steps_per_s": round(float(sum(rates)), 1),
+        "per_world_steps_per_s": rates,
+        "p99_ms_max": max((x for x in p99 if x is not None), default=None),
+        "p99_ms": p99,
+        "resends": sum(s["resends"] for s in stats),
+        "actions_ignored": sum(s.get("actions_ignored", 0) for s in stats),
+        "machine_cpu_busy": busy,
+    }
+
+
+def scale_rows(
+    workers: int, counts: list[int], seconds: float, obs_bytes: int, rounds: int = 1, emit: Any = None
+) -> list[dict]:
+    """One agent with `workers` workers; a row per world count. With `rounds` > 1 the one-world row
+    alternates with a ping-pong (`pingpong`) that many times, each pair emitted as it comes."""
     ep = f"tcp/127.0.0.1:{free_port()}"
     agent = _sme("agent", "--listen", ep, "--workers", str(workers), "--id", "s", "-q")
     rows = []
@@ -130,23 +187,26 @@ def scale_rows(workers: int, counts: list[int], seconds: float, obs_bytes: int) 
         time.sleep(3.0)  # the workers finish starting up (imports) before anything is measured
         with tempfile.TemporaryDirectory() as tmp:
             for n in counts:
-                stats = serve_worlds(ep, n, seconds, obs_bytes, tmp)
-                rates = [s.get("steady_steps_per_s", s["steps_per_s"]) for s in stats]
-                p99 = [s.get("p99_ms") for s in stats]
-                rows.append(
-                    {
-                        "bench": "scale",
-                        "workers": workers,
-                        "worlds": n,
-                        "obs_bytes": obs_bytes,
-                        "steps_per_s": round(float(sum(rates)), 1),
-                        "per_world_steps_per_s": rates,
-                        "p99_ms_max": max((x for x in p99 if x is not None), default=None),
-                        "p99_ms": p99,
-                        "resends": sum(s["resends"] for s in stats),
-                        "actions_ignored": sum(s.get("actions_ignored", 0) for s in stats),
-                    }
-                )
+                pairs = rounds if n == 1 and rounds > 1 else 1
+                for _ in range(pairs):
+                    pp = pingpong(obs_bytes, min(seconds, 5.0)) if pairs > 1 else None
+                    samples: list[tuple[float, tuple[float, float] | None]] = []
+                    stop = threading.Event()
+                    sampler = threading.Thread(target=_sample_cpu, args=(samples, stop), daemon=True)
+                    sampler.start()
+                    stats = serve_worlds(ep, n, seconds, obs_bytes, tmp)
+                    stop.set()
+                    sampler.join()
+                    row = _row(workers, n, obs_bytes, stats, _busy_mid(samples))
+                    if pp is not None:
+                        row["pingpong"] = pp
+                        row["over_pingpong"] = round(row["steps_per_s"] / max(pp["round_trips_per_s"], 1e-9), 3)
+                        row["over_pingpong_callback"] = round(
+                            row["steps_per_s"] / max(pp["callback_round_trips_per_s"], 1e-9), 3
+                        )
+                    rows.append(row)
+                    if emit is not None:
+                        emit(row)
     finally:
         _stop(agent)
     return rows
@@ -162,9 +222,11 @@ def _pong_side(ep: str, ready: Any, pong_bytes: int) -> None:
 
 
 def pingpong(obs_bytes: int, seconds: float) -> dict:
-    """Raw zenoh round trips with the bench world's message sizes: this process (a client, like a
-    world) puts an observation-sized ping; a router process answers an action-sized pong in its
-    subscriber callback (like `sme agent --workers 1`)."""
+    """Raw zenoh round trips with the bench world's message sizes through a router, two ways for
+    `seconds` each: this process (a client, like a world) puts an observation-sized ping and a
+    router process answers an action-sized pong in its subscriber callback (as `sme agent --workers
+    1` does). The ping side either waits on its main thread for the pong (`round_trips_per_s`) or
+    puts the next ping from its pong callback (`callback_round_trips_per_s`), as `sme world` does."""
     obs = codec.encode(Observation("b0", 0, 1, 0, {"frame": np.zeros(obs_bytes // 4, np.float32)}, 0.0, False))
     act = codec.encode(Action("b0", 1, (0.0,)))
     ep = f"tcp/127.0.0.1:{free_port()}"
@@ -176,7 +238,17 @@ def pingpong(obs_bytes: int, seconds: float) -> dict:
         ready.wait(60)
         with Bus(BusConfig.for_role("world", ep)) as bus:
             got = threading.Event()
-            bus.subscribe("bench/pong", lambda m: got.set())
+            in_callback = threading.Event()
+            stamps: list[float] = []
+
+            def on_pong(m: Any) -> None:
+                if not in_callback.is_set():
+                    got.set()
+                    return
+                stamps.append(time.perf_counter())
+                pub.put(obs)
+
+            bus.subscribe("bench/pong", on_pong)
             pub = bus.publisher("bench/ping")
             time.sleep(0.5)
             lat = []
@@ -188,10 +260,16 @@ def pingpong(obs_bytes: int, seconds: float) -> dict:
                 if not got.wait(1.0):
                     continue
                 lat.append(time.perf_counter() - t)
+            in_callback.set()
+            pub.put(obs)
+            time.sleep(seconds)
+            in_callback.clear()
+            time.sleep(0.05)
     finally:
         peer.kill()
         peer.join()
     lat_ms = np.asarray(lat[300:] or lat) * 1e3
+    cb = np.diff(np.asarray(stamps[300:] or stamps)) * 1e3
     return {
         "bench": "pingpong",
         "ping_bytes": len(obs),
@@ -199,6 +277,8 @@ def pingpong(obs_bytes: int, seconds: float) -> dict:
         "round_trips_per_s": round(1e3 / float(lat_ms.mean()), 1) if lat_ms.size else 0.0,
         "p50_ms": round(float(np.percentile(lat_ms, 50)), 4) if lat_ms.size else None,
         "p99_ms": round(float(np.percentile(lat_ms, 99)), 4) if lat_ms.size else None,
+        "callback_round_trips_per_s": round(1e3 / float(cb.mean()), 1) if cb.size else 0.0,
+        "callback_p99_ms": round(float(np.percentile(cb, 99)), 4) if cb.size else None,
     }
 
 
@@ -264,29 +344,41 @@ def main_args(args: argparse.Namespace) -> int:
         return 2
     emit = (lambda r: print(json.dumps(r), flush=True)) if args.json else (lambda r: _print(r))
     try:
-        base = pingpong(args.obs_bytes, min(args.seconds, 5.0))
-        emit(base)
-        by: dict[tuple[int, int], dict] = {}
+        by: dict[tuple[int, int], list[dict]] = {}
         for w in sorted({1, args.workers}):
-            for r in scale_rows(w, counts, args.seconds, args.obs_bytes):
-                by[(w, r["worlds"])] = r
-                emit(r)
+            for r in scale_rows(w, counts, args.seconds, args.obs_bytes, args.rounds if w == 1 else 1, emit):
+                by.setdefault((w, r["worlds"]), []).append(r)
         fo = None if args.no_failover else failover(args.obs_bytes)
         if fo is not None:
             emit(fo)
     except RuntimeError as e:
         print(f"sme bench scale: {e}", file=sys.stderr)
         return 1
+    emit(summarize(by, counts, args.workers, fo))
+    return 0
+
+
+def summarize(by: dict[tuple[int, int], list[dict]], counts: list[int], workers: int, fo: dict | None) -> dict:
+    """The run's figures against the targets (medians over the rounds where there are several)."""
     top = max(counts)
-    one = by.get((1, 1))
-    summary: dict[str, Any] = {"bench": "scale-summary", "workers": args.workers}
-    if (1, top) in by and (args.workers, top) in by:
-        summary[f"speedup_at_{top}_worlds"] = round(
-            by[(args.workers, top)]["steps_per_s"] / by[(1, top)]["steps_per_s"], 2
-        )
-    if one is not None:
-        summary["single_world_steps_per_s"] = one["steps_per_s"]
-        summary["single_world_over_pingpong"] = round(one["steps_per_s"] / max(base["round_trips_per_s"], 1e-9), 2)
+    summary: dict[str, Any] = {"bench": "scale-summary", "workers": workers}
+    if (1, top) in by and (workers, top) in by:
+        one, many = by[(1, top)][0], by[(workers, top)][0]
+        summary[f"speedup_at_{top}_worlds"] = round(many["steps_per_s"] / one["steps_per_s"], 2)
+        busy = one.get("machine_cpu_busy")
+        if busy:
+            # with every core this busy at one worker, more workers can add at most 1/busy
+            summary[f"machine_cpu_busy_at_{top}_worlds_workers_1"] = busy
+            summary[f"speedup_bound_at_{top}_worlds"] = round(1.0 / busy, 2)
+    ones = by.get((1, 1), [])
+    if ones:
+        summary["single_world_steps_per_s"] = float(np.median([r["steps_per_s"] for r in ones]))
+        if "over_pingpong" in ones[0]:
+            summary["single_world_over_pingpong"] = float(np.median([r["over_pingpong"] for r in ones]))
+            summary["single_world_over_pingpong_callback"] = float(
+                np.median([r["over_pingpong_callback"] for r in ones])
+            )
+            summary["rounds"] = len(ones)
     if fo is not None:
         summary["failover_seconds"] = fo["seconds"]
     summary["targets"] = {
@@ -295,21 +387,23 @@ def main_args(args: argparse.Namespace) -> int:
         "single_world_over_pingpong": 0.6,
         "failover_seconds": 5.0,
     }
-    emit(summary)
-    return 0
+    return summary
 
 
 def _print(r: dict) -> None:
     if r["bench"] == "scale":
         print(
             f"workers {r['workers']}  worlds {r['worlds']}  {r['steps_per_s']:>9,.0f} steps/s in total  "
-            f"p99 max {r['p99_ms_max']} ms  resends {r['resends']}"
+            f"p99 max {r['p99_ms_max']} ms  resends {r['resends']}  machine CPU busy {r['machine_cpu_busy']}"
         )
-    elif r["bench"] == "pingpong":
-        print(
-            f"raw zenoh ping-pong ({r['ping_bytes']} B / {r['pong_bytes']} B via a router): "
-            f"{r['round_trips_per_s']:,.0f} round trips/s, p50 {r['p50_ms']} ms, p99 {r['p99_ms']} ms"
-        )
+        if "pingpong" in r:
+            pp = r["pingpong"]
+            print(
+                f"  raw zenoh ping-pong ({pp['ping_bytes']} B / {pp['pong_bytes']} B via a router) just before: "
+                f"{pp['round_trips_per_s']:,.0f} round trips/s waiting on the main thread "
+                f"(one world: {r['over_pingpong']:.0%}), {pp['callback_round_trips_per_s']:,.0f} answering in "
+                f"the callback ({r['over_pingpong_callback']:.0%})"
+            )
     elif r["bench"] == "failover":
         print(f"failover: {r['worlds_moved']} worlds answered again after {r['seconds']} s (ok: {r['ok']})")
     else:
