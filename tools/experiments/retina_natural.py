@@ -19,6 +19,9 @@ from sensorimotor.worlds.natural_retina import NaturalRetinaWorld
 EVAL_SEED = 999
 #: repeated saccades stop at a fixed point (a move < 0.5 px), at a cycle, or after this many
 MAX_SACCADES = 20
+#: the learner's credit on a natural scene: capped at each field's share of the saccade (see
+#: `agent.learners.saccade`); Eq 4.5 as written ("activation") lets large blobs bias the fovea
+CREDIT = "share"
 #: Table 4.1 of the dissertation (px)
 DISSERTATION = {"one": 20.4, "two": 12.5, "fixed": 7.6, "geometry": 20.0}
 
@@ -83,10 +86,13 @@ def learning(
     image: str = "astronaut",
     n_eval: int = 30,
     noise_sd: float | None = None,
+    credit: str = CREDIT,
 ) -> list[tuple[int, Accuracy]]:
     """Train the retina program for `steps` saccades; greedy evaluation every `every`."""
     world = NaturalRetinaWorld(seed=seed, image=image)
-    program = RetinaProgram(world.spec(), seed=seed, embed_every=10**9, exploration="gaussian", noise_sd=noise_sd)
+    program = RetinaProgram(
+        world.spec(), seed=seed, embed_every=10**9, exploration="gaussian", noise_sd=noise_sd, credit=credit
+    )
     curve: list[tuple[int, Accuracy]] = []
 
     def on_step(k: int, obs: Observation) -> None:
