@@ -17,15 +17,15 @@ all the time costs accuracy - a lucky random saccade pulls every active field's 
 way - so it is kept for what 4.4.2 introduced it for: large changes.
 The learned geometry is -pi_k: the position of field k in motor units.
 
-Credit (`credit`): "activation" is Eq 4.5 as written, step d_k a. "share" caps it at the field's
-share of the saccade: step d_k a min(1, d_k A / sum_j d_j), where d_k / sum_j d_j is the field's
-weight in pi* (Eq 4.3) and A the moving average of the pre-saccade total activation (a fully lit
-field's weight in a typical saccade is 1 / A). Eq 4.5 assumes a small spot, where a lit field says
-where the target is; on a natural scene a large blob lights hundreds of fields at once, each is
-pulled fully to the one saccade that centred the blob, and the preferences of the fovea learn a
-common offset (about 6 px on 'astronaut') that repeated saccades integrate into a drift off the
-blob. Under "share" a field under a larger-than-usual blob learns in proportion to its say in the
-saccade; a spot-sized target (total activation at most A) learns as Eq 4.5.
+Credit (`credit`): "activation" is Eq 4.5 as written, step d_k a. "share" shares one saccade's
+credit among the fields it lit: step d_k a min(1, A / sum_j d_j), A the moving average of the
+pre-saccade total activation, so no saccade teaches more than a typical one (sum_k step_k <= a A).
+Eq 4.5 assumes a small spot, where a lit field says where the target is; on a natural scene a
+large blob lights hundreds of fields at once, each is pulled fully to the one saccade that centred
+the blob, and the preferences of the fovea learn a common offset (about 6 px on 'astronaut') that
+repeated saccades integrate into a drift off the blob. A target no larger than usual (total
+activation <= A) still learns as Eq 4.5. `experience` counts the activation credited (d_k times
+that factor), so fields lit only under large blobs are not embedded before they have learned.
 """
 
 from __future__ import annotations
@@ -41,13 +41,10 @@ CREDIT = ("activation", "share")
 EXPLORATION = ("relearn", "gamma", "gaussian")
 
 
-def share_cap(delta: np.ndarray, typical_total: float) -> np.ndarray:
-    """min(1, d_k A / sum_j d_j): a field's weight in pi* (Eq 4.3) relative to a fully lit field's
-    in a saccade of typical total activation A (1 where nothing is lit)."""
-    total = float(delta.sum())
-    if total <= 1e-12:
-        return np.ones_like(delta)
-    return np.minimum(1.0, delta * typical_total / total)
+def share_factor(total: float, typical_total: float) -> float:
+    """min(1, A / total): the credit factor of a saccade whose pre-saccade activation sums to
+    `total`, when a typical one sums to A (1 when nothing is lit)."""
+    return 1.0 if total <= 1e-12 else min(1.0, typical_total / total)
 
 
 class SaccadeLearner:
@@ -69,8 +66,8 @@ class SaccadeLearner:
     exploration : {"relearn", "gamma", "gaussian"}, default "relearn"
         Exploration mode.
     credit : {"activation", "share"}, default "activation"
-        Step of a field's preference update: Eq 4.5 (d_k alpha), or capped at its share of the
-        saccade (see the module docstring).
+        Step of a field's preference update: Eq 4.5 (d_k alpha), or one saccade's credit shared
+        among the fields it lit (see the module docstring).
     init_spread : float, default 1.0
         Initial preferences are uniform over the box scaled by this, in [0, 1].
     seed : int, default 0
@@ -124,7 +121,7 @@ class SaccadeLearner:
         self.rng = np.random.default_rng(self.seed)
         self.pi = self.rng.uniform(self.low, self.high, (self.n_fields, self.low.size)) * self.init_spread
         self.R = np.zeros(self.n_fields)
-        self.experience = np.zeros(self.n_fields)  # summed pre-saccade activation: how much each field has learned from
+        self.experience = np.zeros(self.n_fields)  # summed (credited) pre-saccade activation: how much each field has learned from
         self.r_ref = 0.0
         self.a_ref = 0.0  # moving average of the pre-saccade total activation (credit "share")
         self.updates = 0
@@ -251,10 +248,8 @@ class SaccadeLearner:
             self.R += step * (reward - self.R)
         else:
             self.R = np.where(better, self.R + step * (reward - self.R), self.R)
-        if self.credit == "share":
-            w = np.where(better, step * share_cap(d, self.a_ref), 0.0)[:, None]
-        else:
-            w = np.where(better, step, 0.0)[:, None]
+        credited = d * share_factor(total, self.a_ref) if self.credit == "share" else d
+        w = np.where(better, credited * self.alpha, 0.0)[:, None]
         self.pi += w * (a - self.pi)
-        self.experience += d
+        self.experience += credited
         self.updates += 1

@@ -38,7 +38,7 @@ class RetinaProgramParams:
     )
     credit: str = option(
         "activation",
-        "preference step: Eq 4.5 (activation), or capped at the field's share of the saccade (share; natural scenes)",
+        "preference step: Eq 4.5 (activation), or a saccade's credit shared among the fields it lit (share; natural scenes)",
         choices=CREDIT,
     )
     embed_every: int = option(1000, "saccades between periodic embeddings", min=1)
