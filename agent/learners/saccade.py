@@ -121,9 +121,8 @@ class SaccadeLearner:
         self.rng = np.random.default_rng(self.seed)
         self.pi = self.rng.uniform(self.low, self.high, (self.n_fields, self.low.size)) * self.init_spread
         self.R = np.zeros(self.n_fields)
-        self.experience = np.zeros(
-            self.n_fields
-        )  # summed (credited) pre-saccade activation: how much each field has learned from
+        # summed (credited) pre-saccade activation: how much each field has learned from
+        self.experience = np.zeros(self.n_fields)
         self.r_ref = 0.0
         self.a_ref = 0.0  # moving average of the pre-saccade total activation (credit "share")
         self.updates = 0
