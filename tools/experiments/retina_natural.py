@@ -161,5 +161,6 @@ def chapter(runs: int, quick: bool, workers: int, out: str, image: str = "astron
         "results": res,
         "summary": {k: {"mean": v[0], "ci95": v[1]} for k, v in ci.items()},
         "dissertation": DISSERTATION,
+        "credit": CREDIT,
         "markdown": "\n".join(lines),
     }
