@@ -78,3 +78,27 @@ def test_seeded_and_validated():
         SaccadeLearner(5, [-1.0], [1.0], rule="fancy")
     with pytest.raises(ValueError, match="expected delta"):
         SaccadeLearner(5, [-1.0], [1.0]).learn_one(np.ones(4), np.zeros(1), 1.0)
+
+
+def test_share_credit_divides_a_large_saccade_among_its_fields():
+    """credit="share": a saccade lighting more than the typical total activation A teaches each lit
+    field A / total of the Eq 4.5 step; one no larger than typical teaches as Eq 4.5."""
+    A = SaccadeLearner(4, [-1.0], [1.0], alpha=0.5, seed=0)
+    S = SaccadeLearner(4, [-1.0], [1.0], alpha=0.5, seed=0, credit="share")
+    spot = np.array([1.0, 0.0, 0.0, 0.0])
+    for L in (A, S):
+        L.learn_one(spot, np.array([0.5]), 2.0)  # the first saccade sets A = 1
+    np.testing.assert_allclose(S.pi, A.pi)  # total 1 <= A: the same step
+    assert S.a_ref == pytest.approx(1.0)
+    blob = np.ones(4)  # total 4: A moves to 1.06, the step is 1.06 / 4 of Eq 4.5's
+    pi0 = S.pi.copy()
+    S.learn_one(blob, np.array([-0.5]), 10.0)
+    f = (1.0 + 0.02 * 3.0) / 4.0
+    np.testing.assert_allclose(S.pi, pi0 + 0.5 * f * (-0.5 - pi0))
+    np.testing.assert_allclose(S.experience, [1.0 + f, f, f, f])  # credited activation
+    snap = S.state()
+    T = SaccadeLearner(4, [-1.0], [1.0], seed=5, credit="share")
+    T.restore(snap)
+    assert T.a_ref == S.a_ref
+    with pytest.raises(ValueError, match="credit"):
+        SaccadeLearner(4, [-1.0], [1.0], credit="fancy")

@@ -16,6 +16,16 @@ default: noise only, and gamma mixing from `reset_estimates()` until `end_relear
 all the time costs accuracy - a lucky random saccade pulls every active field's preference a long
 way - so it is kept for what 4.4.2 introduced it for: large changes.
 The learned geometry is -pi_k: the position of field k in motor units.
+
+Credit (`credit`): "activation" is Eq 4.5 as written, step d_k a. "share" shares one saccade's
+credit among the fields it lit: step d_k a min(1, A / sum_j d_j), A the moving average of the
+pre-saccade total activation, so no saccade teaches more than a typical one (sum_k step_k <= a A).
+Eq 4.5 assumes a small spot, where a lit field says where the target is; on a natural scene a
+large blob lights hundreds of fields at once, each is pulled fully to the one saccade that centred
+the blob, and the preferences of the fovea learn a common offset (about 6 px on 'astronaut') that
+repeated saccades integrate into a drift off the blob. A target no larger than usual (total
+activation <= A) still learns as Eq 4.5. `experience` counts the activation credited (d_k times
+that factor), so fields lit only under large blobs are not embedded before they have learned.
 """
 
 from __future__ import annotations
@@ -27,7 +37,14 @@ import numpy as np
 from sensorimotor.agent.snapshot import rng_state, set_rng_state
 
 RULES = ("basic", "robust")
+CREDIT = ("activation", "share")
 EXPLORATION = ("relearn", "gamma", "gaussian")
+
+
+def share_factor(total: float, typical_total: float) -> float:
+    """min(1, A / total): the credit factor of a saccade whose pre-saccade activation sums to
+    `total`, when a typical one sums to A (1 when nothing is lit)."""
+    return 1.0 if total <= 1e-12 else min(1.0, typical_total / total)
 
 
 class SaccadeLearner:
@@ -48,6 +65,9 @@ class SaccadeLearner:
         Update rule (Eq 4.7 or Eq 4.4-4.5).
     exploration : {"relearn", "gamma", "gaussian"}, default "relearn"
         Exploration mode.
+    credit : {"activation", "share"}, default "activation"
+        Step of a field's preference update: Eq 4.5 (d_k alpha), or one saccade's credit shared
+        among the fields it lit (see the module docstring).
     init_spread : float, default 1.0
         Initial preferences are uniform over the box scaled by this, in [0, 1].
     seed : int, default 0
@@ -65,6 +85,7 @@ class SaccadeLearner:
         exploration: str = "relearn",
         init_spread: float = 1.0,
         seed: int = 0,
+        credit: str = "activation",
     ) -> None:
         low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         if n_fields < 1:
@@ -77,6 +98,8 @@ class SaccadeLearner:
             raise ValueError(f"rule must be one of {RULES}")
         if exploration not in EXPLORATION:
             raise ValueError(f"exploration must be one of {EXPLORATION}")
+        if credit not in CREDIT:
+            raise ValueError(f"credit must be one of {CREDIT}")
         if not 0 <= init_spread <= 1:
             raise ValueError("init_spread must be in [0, 1]")
         self.init_spread = init_spread
@@ -87,6 +110,7 @@ class SaccadeLearner:
         self.noise_sd = float(noise_sd) if noise_sd is not None else float(0.075 * (high - low).mean())
         self.rule = rule
         self.exploration = exploration
+        self.credit = credit
         self.seed = seed
         self.reset()
 
@@ -97,8 +121,10 @@ class SaccadeLearner:
         self.rng = np.random.default_rng(self.seed)
         self.pi = self.rng.uniform(self.low, self.high, (self.n_fields, self.low.size)) * self.init_spread
         self.R = np.zeros(self.n_fields)
-        self.experience = np.zeros(self.n_fields)  # summed pre-saccade activation: how much each field has learned from
+        # summed (credited) pre-saccade activation: how much each field has learned from
+        self.experience = np.zeros(self.n_fields)
         self.r_ref = 0.0
+        self.a_ref = 0.0  # moving average of the pre-saccade total activation (credit "share")
         self.updates = 0
         self.resets = 0
         self.relearning = False
@@ -112,6 +138,7 @@ class SaccadeLearner:
             "R": self.R.copy(),
             "experience": self.experience.copy(),
             "r_ref": self.r_ref,
+            "a_ref": self.a_ref,
             "updates": self.updates,
             "resets": self.resets,
             "relearning": self.relearning,
@@ -127,6 +154,7 @@ class SaccadeLearner:
         set_rng_state(self.rng, state["rng"])
         self.pi, self.R, self.experience = pi, R, experience
         self.r_ref = float(state["r_ref"])
+        self.a_ref = float(state.get("a_ref", 0.0))  # absent in snapshots from before credit "share"
         self.updates, self.resets = int(state["updates"]), int(state["resets"])
         self.relearning = bool(state["relearning"])
 
@@ -213,13 +241,16 @@ class SaccadeLearner:
         if not np.isfinite(reward):
             raise ValueError("reward must be finite")
         self.r_ref += self.REF_RATE * (float(reward) - self.r_ref) if self.updates else float(reward)
+        total = float(d.sum())
+        self.a_ref += self.REF_RATE * (total - self.a_ref) if self.updates else total
         better = reward > self.R
         step = d * self.alpha
         if self.rule == "robust":
             self.R += step * (reward - self.R)
         else:
             self.R = np.where(better, self.R + step * (reward - self.R), self.R)
-        w = np.where(better, step, 0.0)[:, None]
+        credited = d * share_factor(total, self.a_ref) if self.credit == "share" else d
+        w = np.where(better, credited * self.alpha, 0.0)[:, None]
         self.pi += w * (a - self.pi)
-        self.experience += d
+        self.experience += credited
         self.updates += 1

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from sensorimotor.agent.learners.saccade import EXPLORATION, RULES, SaccadeLearner
+from sensorimotor.agent.learners.saccade import CREDIT, EXPLORATION, RULES, SaccadeLearner
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.snapshot import array_or_none
 from sensorimotor.protocol.errors import SpecMismatch
@@ -35,6 +35,11 @@ class RetinaProgramParams:
     alpha: float = option(0.5, "learning rate of the field positions", min=0.0)
     noise_sd: float | None = option(
         None, "exploration noise sd, action units (none: 0.075 x the action range)", min=0.0
+    )
+    credit: str = option(
+        "activation",
+        "preference step: Eq 4.5 (activation), or a saccade's credit shared among the fields it lit (share; natural scenes)",
+        choices=CREDIT,
     )
     embed_every: int = option(1000, "saccades between periodic embeddings", min=1)
     settle_min: int = option(1000, "saccades after a drop before the reward may count as settled", min=0)
@@ -75,6 +80,7 @@ class RetinaProgram(Program):
             exploration=exploration,
             init_spread=self.INIT_SPREAD,
             seed=seed,
+            credit=prm.credit,
         )
         self.embed_every = embed_every
         self.min_experience = min_experience
