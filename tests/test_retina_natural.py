@@ -74,3 +74,14 @@ def test_table_4_1_fixed_point_with_shared_credit():
     assert np.mean([a.one for a in share]) <= N.DISSERTATION["one"]
     eq45 = N.learning(0, 5000, 5000, "astronaut", 30, credit="activation")[-1][1]
     assert eq45.fixed > 2 * share[0].fixed
+
+
+def test_retina_program_shares_credit_by_default_only_on_natural_scenes():
+    from sensorimotor.agent.programs.retina import RetinaProgram
+    from sensorimotor.worlds.retina import RetinaWorld
+
+    assert RetinaProgram(NaturalRetinaWorld(seed=0).spec()).learner.credit == "share"
+    with RetinaWorld(seed=0) as dark:
+        assert RetinaProgram(dark.spec()).learner.credit == "activation"
+    spec = NaturalRetinaWorld(seed=0).spec()
+    assert RetinaProgram(spec, credit="activation").learner.credit == "activation"

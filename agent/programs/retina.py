@@ -37,9 +37,10 @@ class RetinaProgramParams:
         None, "exploration noise sd, action units (none: 0.075 x the action range)", min=0.0
     )
     credit: str = option(
-        "activation",
-        "preference step: Eq 4.5 (activation), or a saccade's credit shared among the fields it lit (share; natural scenes)",
-        choices=CREDIT,
+        "auto",
+        "preference step: Eq 4.5 (activation), or a saccade's credit shared among the fields it lit (share); "
+        "auto: share on the natural-scene retina (world kind retina-natural), activation otherwise",
+        choices=("auto", *CREDIT),
     )
     embed_every: int = option(1000, "saccades between periodic embeddings", min=1)
     settle_min: int = option(1000, "saccades after a drop before the reward may count as settled", min=0)
@@ -80,7 +81,7 @@ class RetinaProgram(Program):
             exploration=exploration,
             init_spread=self.INIT_SPREAD,
             seed=seed,
-            credit=prm.credit,
+            credit=prm.credit if prm.credit != "auto" else ("share" if spec.kind == "retina-natural" else "activation"),
         )
         self.embed_every = embed_every
         self.min_experience = min_experience
