@@ -45,7 +45,7 @@ def _serve(world, endpoint: str, **kw):
 
 
 def test_each_answer_moves_one_step_and_stale_answers_are_ignored(endpoint):
-    t, out = _serve(BenchWorld(obs_bytes=16), endpoint, resend=0.2, max_steps=5)
+    t, out = _serve(BenchWorld(obs_bytes=16), endpoint, resend=0.2)
     seen: list[int] = []
     got = threading.Event()
     with Bus(BusConfig.for_role("world", endpoint)) as bus:
@@ -63,6 +63,11 @@ def test_each_answer_moves_one_step_and_stale_answers_are_ignored(endpoint):
             pub.put(codec.encode(Action("w", step, (0.0,))))  # a duplicate: ignored
             pub.put(codec.encode(Action("w", step + 7, (0.0,))))  # not the awaited step: ignored
             assert got.wait(10)
+        node = out["node"]
+        end = time.monotonic() + 10
+        while node.stats.actions_received < 15 and time.monotonic() < end:
+            time.sleep(0.05)
+        node.stop()
         t.join(10)
     st = out["stats"]
     assert "error" not in out and st.steps == 5
