@@ -34,6 +34,7 @@ jobs in flight are part of `state()` (the base class saves and restores them).
 from __future__ import annotations
 
 import abc
+import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -42,7 +43,7 @@ import numpy as np
 from sensorimotor.agent.programs.background import Background
 from sensorimotor.agent.snapshot import rng_state, set_rng_state
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
-from sensorimotor.protocol.params import parse
+from sensorimotor.protocol.params import option, parse
 
 
 @dataclass(frozen=True)
@@ -86,7 +87,14 @@ class EventOutput:
 
 @dataclass(frozen=True)
 class EchoParams:
-    """The echo program has no parameters."""
+    """Parameters of the echo program (loop benchmarks)."""
+
+    work_us: float = option(
+        0.0,
+        "CPU time spent in Python per answer, in us (a stand-in for a learner's act: `sme bench scale --agent-work-us`)",
+        min=0.0,
+        max=1e6,
+    )
 
 
 class Program(abc.ABC):
@@ -193,5 +201,10 @@ class EchoProgram(Program):
         self.params = parse(EchoParams, overrides, name=self.name, base=params)
 
     def act(self, obs: Observation) -> Decision:
-        """Action 0, whatever the observation."""
+        """Action 0, whatever the observation (after `work_us` of CPU in Python, holding the GIL
+        as a learner written in Python would)."""
+        if self.params.work_us > 0:
+            end = time.thread_time() + self.params.work_us * 1e-6
+            while time.thread_time() < end:
+                pass
         return Decision((0.0,))

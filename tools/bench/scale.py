@@ -48,6 +48,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--worlds", default="1,2,4,8", help="world counts (default 1,2,4,8)")
     p.add_argument("--seconds", type=float, default=6.0, help="seconds each world count runs (default 6)")
     p.add_argument("--obs-bytes", type=int, default=1024, help="observation size in bytes (default 1024)")
+    p.add_argument(
+        "--agent-work-us",
+        type=float,
+        default=0.0,
+        help="CPU time (us) the agent's echo program spends in Python per answer, a stand-in for a learner "
+        "(default 0: the bare loop)",
+    )
     p.add_argument("--rounds", type=int, default=3, help="ping-pong / single-world alternations (default 3)")
     p.add_argument("--no-failover", action="store_true", help="skip the failover measurement")
     p.add_argument("--json", action="store_true", help="one JSON object per line")
@@ -174,12 +181,19 @@ def _row(workers: int, n: int, obs_bytes: int, stats: list[dict], busy: float | 
 
 
 def scale_rows(
-    workers: int, counts: list[int], seconds: float, obs_bytes: int, rounds: int = 1, emit: Any = None
+    workers: int,
+    counts: list[int],
+    seconds: float,
+    obs_bytes: int,
+    rounds: int = 1,
+    emit: Any = None,
+    work_us: float = 0.0,
 ) -> list[dict]:
     """One agent with `workers` workers; a row per world count. With `rounds` > 1 the one-world row
     alternates with a ping-pong (`pingpong`) that many times, each pair emitted as it comes."""
     ep = f"tcp/127.0.0.1:{free_port()}"
-    agent = _sme("agent", "--listen", ep, "--workers", str(workers), "--id", "s", "-q")
+    work = ("--program-param", f"echo.work_us={work_us}") if work_us > 0 else ()
+    agent = _sme("agent", "--listen", ep, "--workers", str(workers), "--id", "s", *work, "-q")
     rows = []
     try:
         if not _wait(lambda: len(_owners(ep)) >= workers, 120):
@@ -198,6 +212,7 @@ def scale_rows(
                     stop.set()
                     sampler.join()
                     row = _row(workers, n, obs_bytes, stats, _busy_mid(samples))
+                    row["agent_work_us"] = work_us
                     if pp is not None:
                         row["pingpong"] = pp
                         row["over_pingpong"] = round(row["steps_per_s"] / max(pp["round_trips_per_s"], 1e-9), 3)
@@ -339,14 +354,18 @@ def main_args(args: argparse.Namespace) -> int:
     except ValueError:
         print(f"sme bench scale: --worlds takes counts like 1,2,4,8, not {args.worlds!r}", file=sys.stderr)
         return 2
-    if not counts or min(counts) < 1 or args.workers < 1 or args.seconds <= 0:
-        print("sme bench scale: --worlds counts, --workers and --seconds must be positive", file=sys.stderr)
+    if not counts or min(counts) < 1 or args.workers < 1 or args.seconds <= 0 or args.rounds < 1:
+        print("sme bench scale: --worlds counts, --workers, --seconds and --rounds must be positive", file=sys.stderr)
+        return 2
+    if not 0 <= args.agent_work_us <= 1e6:
+        print("sme bench scale: --agent-work-us must be between 0 and 1e6", file=sys.stderr)
         return 2
     emit = (lambda r: print(json.dumps(r), flush=True)) if args.json else (lambda r: _print(r))
     try:
         by: dict[tuple[int, int], list[dict]] = {}
         for w in sorted({1, args.workers}):
-            for r in scale_rows(w, counts, args.seconds, args.obs_bytes, args.rounds if w == 1 else 1, emit):
+            rounds = args.rounds if w == 1 else 1
+            for r in scale_rows(w, counts, args.seconds, args.obs_bytes, rounds, emit, args.agent_work_us):
                 by.setdefault((w, r["worlds"]), []).append(r)
         fo = None if args.no_failover else failover(args.obs_bytes)
         if fo is not None:
@@ -362,14 +381,17 @@ def summarize(by: dict[tuple[int, int], list[dict]], counts: list[int], workers:
     """The run's figures against the targets (medians over the rounds where there are several)."""
     top = max(counts)
     summary: dict[str, Any] = {"bench": "scale-summary", "workers": workers}
+    first = next(iter(by.values()), [{}])[0]
+    summary["agent_work_us"] = first.get("agent_work_us", 0.0)
     if (1, top) in by and (workers, top) in by:
         one, many = by[(1, top)][0], by[(workers, top)][0]
         summary[f"speedup_at_{top}_worlds"] = round(many["steps_per_s"] / one["steps_per_s"], 2)
         busy = one.get("machine_cpu_busy")
         if busy:
-            # with every core this busy at one worker, more workers can add at most 1/busy
+            # with the cores this busy at one worker, and each step costing the same CPU, more workers
+            # can add about 1/busy at most
             summary[f"machine_cpu_busy_at_{top}_worlds_workers_1"] = busy
-            summary[f"speedup_bound_at_{top}_worlds"] = round(1.0 / busy, 2)
+            summary[f"speedup_cpu_estimate_at_{top}_worlds"] = round(1.0 / busy, 2)
     ones = by.get((1, 1), [])
     if ones:
         summary["single_world_steps_per_s"] = float(np.median([r["steps_per_s"] for r in ones]))
