@@ -98,3 +98,9 @@ def test_stop_from_another_thread_ends_run_promptly(endpoint):
     t.join(10)
     assert not t.is_alive() and time.monotonic() - t0 < 5.0
     assert out["stats"].steps == 0
+
+
+def test_seconds_bounds_a_world_nobody_answers(endpoint):
+    t, out = _serve(BenchWorld(obs_bytes=16), endpoint, resend=0.1, seconds=1.0)
+    t.join(10)
+    assert not t.is_alive() and out["stats"].steps == 0 and out["stats"].resends >= 5

@@ -155,7 +155,8 @@ class WorldNode:
         self._lock_step: Lockstep | None = None  # set while run() serves
         self._pub: Any = None
         self._data = b""  # the observation awaiting an answer, for resends
-        self._sent = 0.0
+        self._sent = 0.0  # when the awaited observation was first published (latencies count from it)
+        self._put_at = 0.0  # when it was last put (resends count from it)
         self._t0 = 0.0
         self._t_warm: float | None = None
         self._error: BaseException | None = None
@@ -269,7 +270,7 @@ class WorldNode:
         st.episodes += lock.episode - episode
         st.steps += 1
         self._data = self._publish(self._pub, lock)
-        self._sent = time.perf_counter()
+        self._sent = self._put_at = time.perf_counter()
         if (self.max_steps is not None and st.steps >= self.max_steps) or (
             self.seconds is not None and self._sent - self._t0 >= self.seconds
         ):
@@ -337,17 +338,18 @@ class WorldNode:
             self._t0 = time.perf_counter()
             lock = Lockstep(self.world, wid, self.session)
             self._data = self._publish(pub, lock)
-            self._sent = time.perf_counter()
+            self._sent = self._put_at = time.perf_counter()
             self._lock_step = lock
             while not self.stop_event.is_set():
-                self._cv.wait(max(self.resend - (time.perf_counter() - self._sent), 0.001))
-                if self.stop_event.is_set():
-                    break
-                if time.perf_counter() - self._sent >= self.resend:
+                self._cv.wait(max(self.resend - (time.perf_counter() - self._put_at), 0.001))
+                now = time.perf_counter()
+                if self.stop_event.is_set() or (self.seconds is not None and now - self._t0 >= self.seconds):
+                    break  # (the bound holds for a world nobody answers too)
+                if now - self._put_at >= self.resend:
                     self.stats.resends += 1
                     self.stats.published += 1
                     self._pub.put(self._data)  # the same bytes: receivers can tell a resend by its step
-                    self._sent = time.perf_counter()
+                    self._put_at = time.perf_counter()
             self._lock_step = None
         end = time.perf_counter()
         self.stats.seconds = end - self._t0

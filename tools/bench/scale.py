@@ -185,12 +185,12 @@ def scale_rows(
     counts: list[int],
     seconds: float,
     obs_bytes: int,
-    rounds: int = 1,
+    rounds: int = 0,
     emit: Any = None,
     work_us: float = 0.0,
 ) -> list[dict]:
-    """One agent with `workers` workers; a row per world count. With `rounds` > 1 the one-world row
-    alternates with a ping-pong (`pingpong`) that many times, each pair emitted as it comes."""
+    """One agent with `workers` workers; a row per world count. With `rounds` > 0 the one-world row
+    is measured `rounds` times, each after a ping-pong (`pingpong`); each row is emitted as it comes."""
     ep = f"tcp/127.0.0.1:{free_port()}"
     work = ("--program-param", f"echo.work_us={work_us}") if work_us > 0 else ()
     agent = _sme("agent", "--listen", ep, "--workers", str(workers), "--id", "s", *work, "-q")
@@ -201,9 +201,9 @@ def scale_rows(
         time.sleep(3.0)  # the workers finish starting up (imports) before anything is measured
         with tempfile.TemporaryDirectory() as tmp:
             for n in counts:
-                pairs = rounds if n == 1 and rounds > 1 else 1
+                pairs = rounds if n == 1 and rounds > 0 else 1
                 for _ in range(pairs):
-                    pp = pingpong(obs_bytes, min(seconds, 5.0)) if pairs > 1 else None
+                    pp = pingpong(obs_bytes, min(seconds, 5.0)) if n == 1 and rounds > 0 else None
                     samples: list[tuple[float, tuple[float, float] | None]] = []
                     stop = threading.Event()
                     sampler = threading.Thread(target=_sample_cpu, args=(samples, stop), daemon=True)
@@ -364,7 +364,7 @@ def main_args(args: argparse.Namespace) -> int:
     try:
         by: dict[tuple[int, int], list[dict]] = {}
         for w in sorted({1, args.workers}):
-            rounds = args.rounds if w == 1 else 1
+            rounds = args.rounds if w == 1 else 0
             for r in scale_rows(w, counts, args.seconds, args.obs_bytes, rounds, emit, args.agent_work_us):
                 by.setdefault((w, r["worlds"]), []).append(r)
         fo = None if args.no_failover else failover(args.obs_bytes)
