@@ -137,6 +137,17 @@ class Program(abc.ABC):
         """Queue an `EmbeddingOutput` or `EventOutput` for the link (see `drain`)."""
         self._outbox.append(item)
 
+    def emit_lspi_iteration(self, lspi: Any, change: float, step: int) -> None:
+        """Report an LSPI iteration whose weights were just swapped into `lspi` (an `agent.learners.LSPI`)."""
+        self.emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"LSPI iteration {lspi.iterations}",
+                step,
+                {"weight_change": float(change), "samples": float(lspi.n_samples)},
+            )
+        )
+
     def emit_policy_map(
         self, traces: list[Any], ids: tuple[int, ...], step: int, n_clusters: int | None = None, kind: str = "edit"
     ) -> None:

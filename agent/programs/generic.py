@@ -356,14 +356,7 @@ class GenericProgram(Program):
             _set_basis(self._rbf, result["basis"])
         self.lspi.w = np.asarray(result["w"], dtype=np.float64)
         self.lspi.iterations += int(result["iterations"])
-        self.emit(
-            EventOutput(
-                EventKind.POLICY_ITERATION,
-                f"LSPI iteration {self.lspi.iterations}",
-                step,
-                {"weight_change": float(result["change"]), "samples": float(self.lspi.n_samples)},
-            )
-        )
+        self.emit_lspi_iteration(self.lspi, result["change"], step)
 
     def _key(self, obs: Observation) -> bytes:
         return b"".join(np.ascontiguousarray(obs.tensors[s.name]).tobytes() for s in self.spec.sensors)

@@ -21,11 +21,11 @@ import numpy as np
 from sensorimotor.agent.embedding import classical_mds, trace_distances, update_trace_distances
 from sensorimotor.agent.embedding.probabilistic import estimate_distances, relative_change
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
-from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.agent.snapshot import array_or_none, tuple_or_none
 from sensorimotor.protocol.errors import SpecMismatch
-from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
+from sensorimotor.protocol.messages import Observation, Trigger, WorldSpec
 from sensorimotor.protocol.params import option, parse
 
 
@@ -238,14 +238,7 @@ class GridworldProgram(Program):
         """The LSPI job's weights swapped in: report the iteration and sweep with the new policy."""
         self.lspi.w = np.asarray(result["w"], dtype=np.float64)
         self.lspi.iterations += 1
-        self.emit(
-            EventOutput(
-                EventKind.POLICY_ITERATION,
-                f"LSPI iteration {self.lspi.iterations}",
-                step,
-                {"weight_change": float(result["change"]), "samples": float(self.lspi.n_samples)},
-            )
-        )
+        self.emit_lspi_iteration(self.lspi, result["change"], step)
         return self._begin_sweep()
 
     def _begin_sweep(self) -> Decision:
