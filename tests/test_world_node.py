@@ -4,6 +4,7 @@ observation is resent, and a world that fails stops the node with its error on t
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -104,3 +105,19 @@ def test_seconds_bounds_a_world_nobody_answers(endpoint):
     t, out = _serve(BenchWorld(obs_bytes=16), endpoint, resend=0.1, seconds=1.0)
     t.join(10)
     assert not t.is_alive() and out["stats"].steps == 0 and out["stats"].resends >= 5
+
+
+def test_a_measured_node_reports_its_cpu_per_step(endpoint):
+    t, out = _serve(BenchWorld(obs_bytes=64), endpoint, measure=True, warmup=10, max_steps=300)
+    with Bus(BusConfig.for_role("world", endpoint)) as bus:
+        pub = bus.publisher(keys.world_act("w"), codec.schema_name(Action))
+        bus.subscribe(
+            keys.world_obs("w"),
+            lambda m: pub.put(codec.encode(Action("w", codec.decode(Observation, m.payload).step, (0.0,)))),
+        )
+        t.join(30)
+    summary = out["stats"].summary()
+    assert out["stats"].steps == 300 and summary["steady_steps_per_s"] > 0
+    # process_time counts every thread of this process (the answering client too): > 0 and bounded
+    assert 0 < summary["cpu_us_per_step"] < 1e5
+    assert 0 < summary["cpu_cores"] <= (os.cpu_count() or 1) + 0.01

@@ -57,6 +57,7 @@ class NodeStats:
     seconds: float = 0.0
     measured_seconds: float = 0.0
     measured_steps: int = 0
+    measured_cpu_seconds: float = 0.0  # the process's CPU time (all threads) over the measured steps
 
     def summary(self) -> dict:
         """The counts, rates and latency percentiles (ms) as a JSON-ready dict."""
@@ -75,6 +76,9 @@ class NodeStats:
         }
         if self.measured_seconds:
             out["steady_steps_per_s"] = round(self.measured_steps / self.measured_seconds, 1)
+            out["cpu_cores"] = round(self.measured_cpu_seconds / self.measured_seconds, 3)
+        if self.measured_steps:
+            out["cpu_us_per_step"] = round(1e6 * self.measured_cpu_seconds / self.measured_steps, 1)
         if lat.size:
             out.update(
                 p50_ms=round(float(np.percentile(lat, 50)), 4),
@@ -159,6 +163,7 @@ class WorldNode:
         self._put_at = 0.0  # when it was last put (resends count from it)
         self._t0 = 0.0
         self._t_warm: float | None = None
+        self._cpu_warm = 0.0
         self._error: BaseException | None = None
         self._controls: list[Control] = []
         self._ctl_lock = threading.Lock()
@@ -259,7 +264,7 @@ class WorldNode:
             now = time.perf_counter()
             st.latencies.append(now - self._sent)
             if self._t_warm is None:
-                self._t_warm = now
+                self._t_warm, self._cpu_warm = now, time.process_time()
             st.measured_steps += 1
         self._apply_controls()
         episode = lock.episode
@@ -355,6 +360,7 @@ class WorldNode:
         self.stats.seconds = end - self._t0
         if self._t_warm is not None:
             self.stats.measured_seconds = end - self._t_warm
+            self.stats.measured_cpu_seconds = time.process_time() - self._cpu_warm
         if self._error is not None:
             raise self._error
         return self.stats

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.protocol import codec, keys
-from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.protocol.bus import ONE_THREAD_RUNTIME, Bus, BusConfig, BusError
 from sensorimotor.protocol.messages import Action, AgentStatus, Observation
 from sensorimotor.tools.common import free_port
 
@@ -177,6 +177,8 @@ def _row(workers: int, n: int, obs_bytes: int, stats: list[dict], busy: float | 
         "resends": sum(s["resends"] for s in stats),
         "actions_ignored": sum(s.get("actions_ignored", 0) for s in stats),
         "machine_cpu_busy": busy,
+        "world_cpu_cores": round(sum(s.get("cpu_cores", 0.0) for s in stats), 3),
+        "world_cpu_us_per_step": [s.get("cpu_us_per_step") for s in stats],
     }
 
 
@@ -203,7 +205,10 @@ def scale_rows(
             for n in counts:
                 pairs = rounds if n == 1 and rounds > 0 else 1
                 for _ in range(pairs):
-                    pp = pingpong(obs_bytes, min(seconds, 5.0)) if n == 1 and rounds > 0 else None
+                    pps = {}
+                    if n == 1 and rounds > 0:
+                        pps[""] = pingpong(obs_bytes, min(seconds, 5.0))
+                        pps["_world_runtime"] = pingpong(obs_bytes, min(seconds, 5.0), ONE_THREAD_RUNTIME)
                     samples: list[tuple[float, tuple[float, float] | None]] = []
                     stop = threading.Event()
                     sampler = threading.Thread(target=_sample_cpu, args=(samples, stop), daemon=True)
@@ -213,12 +218,10 @@ def scale_rows(
                     sampler.join()
                     row = _row(workers, n, obs_bytes, stats, _busy_mid(samples))
                     row["agent_work_us"] = work_us
-                    if pp is not None:
-                        row["pingpong"] = pp
-                        row["over_pingpong"] = round(row["steps_per_s"] / max(pp["round_trips_per_s"], 1e-9), 3)
-                        row["over_pingpong_callback"] = round(
-                            row["steps_per_s"] / max(pp["callback_round_trips_per_s"], 1e-9), 3
-                        )
+                    for tag, pp in pps.items():
+                        row[f"pingpong{tag}"] = pp
+                        for way, field in (("", "round_trips_per_s"), ("_callback", "callback_round_trips_per_s")):
+                            row[f"over_pingpong{tag}{way}"] = round(row["steps_per_s"] / max(pp[field], 1e-9), 3)
                     rows.append(row)
                     if emit is not None:
                         emit(row)
@@ -236,50 +239,63 @@ def _pong_side(ep: str, ready: Any, pong_bytes: int) -> None:
         time.sleep(3600)
 
 
-def pingpong(obs_bytes: int, seconds: float) -> dict:
+def _ping_side(ep: str, seconds: float, obs: bytes, runtime: str | None, out: Any) -> None:
+    if runtime:
+        os.environ["ZENOH_RUNTIME"] = runtime  # before this process opens its first session
+    with Bus(BusConfig.for_role("world", ep)) as bus:
+        got = threading.Event()
+        in_callback = threading.Event()
+        stamps: list[float] = []
+
+        def on_pong(m: Any) -> None:
+            if not in_callback.is_set():
+                got.set()
+                return
+            stamps.append(time.perf_counter())
+            pub.put(obs)
+
+        bus.subscribe("bench/pong", on_pong)
+        pub = bus.publisher("bench/ping")
+        time.sleep(0.5)
+        lat = []
+        end = time.perf_counter() + seconds
+        while time.perf_counter() < end:
+            got.clear()
+            t = time.perf_counter()
+            pub.put(obs)
+            if not got.wait(1.0):
+                continue
+            lat.append(time.perf_counter() - t)
+        in_callback.set()
+        pub.put(obs)
+        time.sleep(seconds)
+        in_callback.clear()
+        time.sleep(0.05)
+    out.put((lat, stamps))
+
+
+def pingpong(obs_bytes: int, seconds: float, runtime: str | None = None) -> dict:
     """Raw zenoh round trips with the bench world's message sizes through a router, two ways for
-    `seconds` each: this process (a client, like a world) puts an observation-sized ping and a
-    router process answers an action-sized pong in its subscriber callback (as `sme agent --workers
-    1` does). The ping side either waits on its main thread for the pong (`round_trips_per_s`) or
-    puts the next ping from its pong callback (`callback_round_trips_per_s`), as `sme world` does."""
+    `seconds` each: a client process (like a world) puts an observation-sized ping and a router
+    process answers an action-sized pong in its subscriber callback (as `sme agent --workers 1`
+    does). The ping side either waits on its main thread for the pong (`round_trips_per_s`) or
+    puts the next ping from its pong callback (`callback_round_trips_per_s`), as `sme world` does.
+    Both sides run zenoh's default runtime unless `runtime` (a `ZENOH_RUNTIME` value) is given for
+    the ping side, e.g. the one `sme world` uses (`bus.ONE_THREAD_RUNTIME`)."""
     obs = codec.encode(Observation("b0", 0, 1, 0, {"frame": np.zeros(obs_bytes // 4, np.float32)}, 0.0, False))
     act = codec.encode(Action("b0", 1, (0.0,)))
     ep = f"tcp/127.0.0.1:{free_port()}"
     ctx = mp.get_context("spawn")
     ready = ctx.Event()
+    out = ctx.Queue()
     peer = ctx.Process(target=_pong_side, args=(ep, ready, len(act)), daemon=True)
     peer.start()
     try:
         ready.wait(60)
-        with Bus(BusConfig.for_role("world", ep)) as bus:
-            got = threading.Event()
-            in_callback = threading.Event()
-            stamps: list[float] = []
-
-            def on_pong(m: Any) -> None:
-                if not in_callback.is_set():
-                    got.set()
-                    return
-                stamps.append(time.perf_counter())
-                pub.put(obs)
-
-            bus.subscribe("bench/pong", on_pong)
-            pub = bus.publisher("bench/ping")
-            time.sleep(0.5)
-            lat = []
-            end = time.perf_counter() + seconds
-            while time.perf_counter() < end:
-                got.clear()
-                t = time.perf_counter()
-                pub.put(obs)
-                if not got.wait(1.0):
-                    continue
-                lat.append(time.perf_counter() - t)
-            in_callback.set()
-            pub.put(obs)
-            time.sleep(seconds)
-            in_callback.clear()
-            time.sleep(0.05)
+        pinger = ctx.Process(target=_ping_side, args=(ep, seconds, obs, runtime, out), daemon=True)
+        pinger.start()
+        lat, stamps = out.get(timeout=2 * seconds + 60)
+        pinger.join(10)
     finally:
         peer.kill()
         peer.join()
@@ -289,6 +305,7 @@ def pingpong(obs_bytes: int, seconds: float) -> dict:
         "bench": "pingpong",
         "ping_bytes": len(obs),
         "pong_bytes": len(act),
+        "ping_runtime": runtime or "default",
         "round_trips_per_s": round(1e3 / float(lat_ms.mean()), 1) if lat_ms.size else 0.0,
         "p50_ms": round(float(np.percentile(lat_ms, 50)), 4) if lat_ms.size else None,
         "p99_ms": round(float(np.percentile(lat_ms, 99)), 4) if lat_ms.size else None,
@@ -385,21 +402,22 @@ def summarize(by: dict[tuple[int, int], list[dict]], counts: list[int], workers:
     summary["agent_work_us"] = first.get("agent_work_us", 0.0)
     if (1, top) in by and (workers, top) in by:
         one, many = by[(1, top)][0], by[(workers, top)][0]
-        summary[f"speedup_at_{top}_worlds"] = round(many["steps_per_s"] / one["steps_per_s"], 2)
+        if one["steps_per_s"] > 0:
+            summary[f"speedup_at_{top}_worlds"] = round(many["steps_per_s"] / one["steps_per_s"], 2)
         busy = one.get("machine_cpu_busy")
         if busy:
             # with the cores this busy at one worker, and each step costing the same CPU, more workers
             # can add about 1/busy at most
             summary[f"machine_cpu_busy_at_{top}_worlds_workers_1"] = busy
             summary[f"speedup_cpu_estimate_at_{top}_worlds"] = round(1.0 / busy, 2)
+        if one.get("world_cpu_cores"):
+            summary[f"world_cpu_cores_at_{top}_worlds_workers_1"] = one["world_cpu_cores"]
     ones = by.get((1, 1), [])
     if ones:
         summary["single_world_steps_per_s"] = float(np.median([r["steps_per_s"] for r in ones]))
+        for key in sorted(k for k in ones[0] if k.startswith("over_pingpong")):
+            summary[f"single_world_{key}"] = float(np.median([r[key] for r in ones]))
         if "over_pingpong" in ones[0]:
-            summary["single_world_over_pingpong"] = float(np.median([r["over_pingpong"] for r in ones]))
-            summary["single_world_over_pingpong_callback"] = float(
-                np.median([r["over_pingpong_callback"] for r in ones])
-            )
             summary["rounds"] = len(ones)
     if fo is not None:
         summary["failover_seconds"] = fo["seconds"]
@@ -414,9 +432,13 @@ def summarize(by: dict[tuple[int, int], list[dict]], counts: list[int], workers:
 
 def _print(r: dict) -> None:
     if r["bench"] == "scale":
+        if not r["steps_per_s"]:
+            print(f"workers {r['workers']}  worlds {r['worlds']}: no world was answered in time (raise --seconds)")
+            return
         print(
             f"workers {r['workers']}  worlds {r['worlds']}  {r['steps_per_s']:>9,.0f} steps/s in total  "
-            f"p99 max {r['p99_ms_max']} ms  resends {r['resends']}  machine CPU busy {r['machine_cpu_busy']}"
+            f"p99 max {r['p99_ms_max']} ms  resends {r['resends']}  machine CPU busy {r['machine_cpu_busy']}  "
+            f"worlds' own CPU {r['world_cpu_cores']} cores"
         )
         if "pingpong" in r:
             pp = r["pingpong"]
@@ -425,6 +447,13 @@ def _print(r: dict) -> None:
                 f"{pp['round_trips_per_s']:,.0f} round trips/s waiting on the main thread "
                 f"(one world: {r['over_pingpong']:.0%}), {pp['callback_round_trips_per_s']:,.0f} answering in "
                 f"the callback ({r['over_pingpong_callback']:.0%})"
+            )
+        if "pingpong_world_runtime" in r:
+            pp = r["pingpong_world_runtime"]
+            print(
+                f"  the same with the ping side on the worlds' one-thread zenoh runtime: "
+                f"{pp['round_trips_per_s']:,.0f} ({r['over_pingpong_world_runtime']:.0%}) and "
+                f"{pp['callback_round_trips_per_s']:,.0f} ({r['over_pingpong_world_runtime_callback']:.0%})"
             )
     elif r["bench"] == "failover":
         print(f"failover: {r['worlds_moved']} worlds answered again after {r['seconds']} s (ok: {r['ok']})")
