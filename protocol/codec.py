@@ -84,7 +84,7 @@ def _tensor_from_pb(t: pb.Tensor, where: str) -> np.ndarray:
     dt = DTYPES.get(t.dtype)
     if dt is None:
         raise errors.BadDtype(f"{where}: tensor {name!r} has dtype {t.dtype!r}; allowed: {sorted(DTYPES)}")
-    shape = tuple(int(s) for s in t.shape)
+    shape = tuple(t.shape)
     if len(shape) > MAX_DIMS:
         raise errors.ShapeMismatch(f"{where}: tensor {name!r} has {len(shape)} dimensions, at most {MAX_DIMS}")
     claimed = math.prod(shape) * dt.itemsize  # Python ints: a huge claim cannot overflow
@@ -92,11 +92,12 @@ def _tensor_from_pb(t: pb.Tensor, where: str) -> np.ndarray:
         raise errors.OversizeMessage(
             f"{where}: tensor {name!r} claims shape {list(shape)} = {claimed} bytes, at most {MAX_TENSOR_BYTES}"
         )
-    if claimed != len(t.data):
+    data = t.data  # each access copies the bytes out of the message
+    if claimed != len(data):
         raise errors.ShapeMismatch(
-            f"{where}: tensor {name!r} shape {list(shape)} x {dt.name} needs {claimed} bytes, got {len(t.data)}"
+            f"{where}: tensor {name!r} shape {list(shape)} x {dt.name} needs {claimed} bytes, got {len(data)}"
         )
-    a = np.frombuffer(t.data, dtype=dt).reshape(shape)
+    a = np.frombuffer(data, dtype=dt).reshape(shape)
     if dt.kind == "f" and a.size and not np.isfinite(a).all():
         raise errors.NonFiniteValue(f"{where}: tensor {name!r} contains NaN or inf")
     return a
