@@ -53,10 +53,12 @@ def test_echo_work_us_spends_that_much_cpu_per_answer():
     assert t2 - t1 >= 5 * 3000e-6 and t1 - t0 < 5 * 3000e-6 / 10
 
 
-def test_summary_reports_each_ping_pong_baseline_and_the_worlds_cpu():
+def test_summary_reports_each_ping_pong_baseline_the_worlds_cpu_and_the_gap():
     row = {**_row(1, 1, 2400, 0.5, 4000), "over_pingpong_world_runtime": 0.55}
     by = {(1, 1): [row], (1, 8): [{**_row(1, 8, 6000, 0.9), "world_cpu_cores": 1.15}], (2, 8): [_row(2, 8, 5000, 1.0)]}
-    s = summarize(by, [1, 8], 2, None)
+    gaps = [{"bench": "gap", "world": "gridworld", "max_ms": 12.5}, {"bench": "gap", "world": "retina", "max_ms": 30.1}]
+    s = summarize(by, [1, 8], 2, None, gaps)
+    assert s["gridworld_max_gap_ms"] == 12.5 and s["targets"]["gridworld_max_gap_ms"] == 20.0
     assert s["single_world_over_pingpong"] == 0.6 and s["single_world_over_pingpong_world_runtime"] == 0.55
     assert s["world_cpu_cores_at_8_worlds_workers_1"] == 1.15 and s["speedup_at_8_worlds"] == 0.83
 
@@ -75,7 +77,19 @@ def test_bench_scale_runs_end_to_end(tmp_path):
     own tests in test_owners.py)."""
     out = subprocess.run(
         [sys.executable, "-m", "sensorimotor.tools.cli", "bench", "scale", "--worlds", "1", "--rounds", "1"]
-        + ["--seconds", "4", "--workers", "1", "--obs-bytes", "256", "--no-failover", "--json", "-q"],
+        + [
+            "--seconds",
+            "4",
+            "--workers",
+            "1",
+            "--obs-bytes",
+            "256",
+            "--no-failover",
+            "--gap-seconds",
+            "0",
+            "--json",
+            "-q",
+        ],
         capture_output=True,
         text=True,
         timeout=240,

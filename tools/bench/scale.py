@@ -1,7 +1,8 @@
 """`sme bench scale`: aggregate lockstep steps/s and per-world p99 for 1, 2, 4, 8 bench worlds served
 by one agent with `--workers 1` and `--workers N`, in one run; a raw Zenoh ping-pong of the same
-message sizes through the same router as the baseline; and the failover time (kill -9 of one of two
-agents until its worlds are answered again by the other).
+message sizes through the same router as the baseline; the failover time (kill -9 of one of two
+agents until its worlds are answered again by the other); and the max observation->action gap of a
+gridworld beside a re-embedding retina (`bench.gap`, learning in the background).
 
 Every process is a subprocess on loopback (free ports, no multicast): `sme agent`, `sme world bench`.
 Aggregate steps/s is the sum of each world's steady rate (after its warm-up) over runs of the same
@@ -30,6 +31,7 @@ import numpy as np
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import ONE_THREAD_RUNTIME, Bus, BusConfig, BusError
 from sensorimotor.protocol.messages import Action, AgentStatus, Observation
+from sensorimotor.tools.bench import gap
 from sensorimotor.tools.common import free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -38,11 +40,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "scale",
-        help="steps/s and p99 for 1-8 worlds with 1 and N workers; ping-pong baseline; failover time",
+        help="steps/s and p99 for 1-8 worlds with 1 and N workers; ping-pong baseline; failover time; max gap",
         description="Serve 1, 2, 4 and 8 bench worlds (separate processes) by one `sme agent --workers 1` "
         "and by one `sme agent --workers N`; report the aggregate steps/s and each world's round-trip p99; "
-        "a raw zenoh ping-pong of the same message sizes through a router (the baseline); and the failover "
-        "time: two agents, kill -9 of one, seconds until its worlds are answered by the other.",
+        "a raw zenoh ping-pong of the same message sizes through a router (the baseline); the failover "
+        "time: two agents, kill -9 of one, seconds until its worlds are answered by the other; and the max "
+        "observation->action gap of a gridworld beside a re-embedding retina.",
     )
     p.add_argument("--workers", type=int, default=max(2, os.cpu_count() or 1), help="N (default: cores, at least 2)")
     p.add_argument("--worlds", default="1,2,4,8", help="world counts (default 1,2,4,8)")
@@ -57,6 +60,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--rounds", type=int, default=3, help="ping-pong / single-world alternations (default 3)")
     p.add_argument("--no-failover", action="store_true", help="skip the failover measurement")
+    p.add_argument(
+        "--gap-seconds",
+        type=float,
+        default=20.0,
+        help="seconds of a gridworld beside a re-embedding retina on one agent, learning in the background, "
+        "for the max observation->action gap (as `sme bench gap --modes background`; 0 skips it; default 20)",
+    )
     p.add_argument("--json", action="store_true", help="one JSON object per line")
     p.set_defaults(func=main_args)
 
@@ -374,6 +384,9 @@ def main_args(args: argparse.Namespace) -> int:
     if not counts or min(counts) < 1 or args.workers < 1 or args.seconds <= 0 or args.rounds < 1:
         print("sme bench scale: --worlds counts, --workers, --seconds and --rounds must be positive", file=sys.stderr)
         return 2
+    if args.gap_seconds < 0:
+        print("sme bench scale: --gap-seconds must be >= 0 (0 skips the gap measurement)", file=sys.stderr)
+        return 2
     if not 0 <= args.agent_work_us <= 1e6:
         print("sme bench scale: --agent-work-us must be between 0 and 1e6", file=sys.stderr)
         return 2
@@ -387,17 +400,28 @@ def main_args(args: argparse.Namespace) -> int:
         fo = None if args.no_failover else failover(args.obs_bytes)
         if fo is not None:
             emit(fo)
+        gaps = gap.run_mode("background", args.gap_seconds, 50, 50) if args.gap_seconds > 0 else []
+        for r in gaps:
+            emit(r)
     except RuntimeError as e:
         print(f"sme bench scale: {e}", file=sys.stderr)
         return 1
-    emit(summarize(by, counts, args.workers, fo))
+    emit(summarize(by, counts, args.workers, fo, gaps))
     return 0
 
 
-def summarize(by: dict[tuple[int, int], list[dict]], counts: list[int], workers: int, fo: dict | None) -> dict:
+def summarize(
+    by: dict[tuple[int, int], list[dict]],
+    counts: list[int],
+    workers: int,
+    fo: dict | None,
+    gaps: list[dict] | None = None,
+) -> dict:
     """The run's figures against the targets (medians over the rounds where there are several)."""
     top = max(counts)
     summary: dict[str, Any] = {"bench": "scale-summary", "workers": workers}
+    for r in gaps or []:
+        summary[f"{r['world']}_max_gap_ms"] = r["max_ms"]
     first = next(iter(by.values()), [{}])[0]
     summary["agent_work_us"] = first.get("agent_work_us", 0.0)
     if (1, top) in by and (workers, top) in by:
@@ -426,6 +450,7 @@ def summarize(by: dict[tuple[int, int], list[dict]], counts: list[int], workers:
         "single_world_steps_per_s": 2000,
         "single_world_over_pingpong": 0.6,
         "failover_seconds": 5.0,
+        "gridworld_max_gap_ms": gap.TARGET_MAX_MS,
     }
     return summary
 
@@ -455,6 +480,11 @@ def _print(r: dict) -> None:
                 f"{pp['round_trips_per_s']:,.0f} ({r['over_pingpong_world_runtime']:.0%}) and "
                 f"{pp['callback_round_trips_per_s']:,.0f} ({r['over_pingpong_world_runtime_callback']:.0%})"
             )
+    elif r["bench"] == "gap":
+        print(
+            f"gap: {r['world']} beside the other world, learning in the background: {r['steps']} steps, "
+            f"{r['embeddings']} embeddings, observation->action gap p99 {r['p99_ms']} ms, max {r['max_ms']} ms"
+        )
     elif r["bench"] == "failover":
         print(f"failover: {r['worlds_moved']} worlds answered again after {r['seconds']} s (ok: {r['ok']})")
     else:
