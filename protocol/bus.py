@@ -15,7 +15,6 @@ import argparse
 import collections
 import json
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -28,30 +27,6 @@ from sensorimotor.protocol import security
 from sensorimotor.protocol.keys import DEFAULT_ENDPOINT, DEFAULT_SECURE_ENDPOINT
 
 log = logging.getLogger("sme.bus")
-
-
-# zenoh's I/O on one thread: receive, the subscriber callback, and send, with no hand-off between
-# zenoh's rx, tx and app runtimes. See `prefer_one_runtime_thread`.
-ONE_THREAD_RUNTIME = (
-    "(rx: (handover: app), tx: (handover: app), acc: (handover: app), net: (handover: app), app: (worker_threads: 1))"
-)
-
-
-def prefer_one_runtime_thread() -> bool:
-    """Run this process's zenoh I/O on one thread (`ZENOH_RUNTIME`), unless the user chose a value.
-
-    For a process that serves one lockstep stream and answers it in the subscriber callback (a
-    world): each message otherwise crosses from zenoh's rx thread to its tx thread and wakes both.
-    Measured here (2 cores): a raw ping-pong 3,400 -> 5,400 round trips/s; a bench world's CPU per
-    step 250 -> 190 us; 8 bench worlds on one agent 4,900 -> 6,200 steps/s in all. Not for the
-    agent: with one runtime thread, a callback that waits for a lock another thread holds across a
-    zenoh call stalls the whole session. Call it before the process opens its first session (zenoh
-    reads the variable once). Returns whether it set the variable.
-    """
-    if os.environ.get("ZENOH_RUNTIME", "").strip():
-        return False  # the user's choice (an empty value would make zenoh panic: replaced)
-    os.environ["ZENOH_RUNTIME"] = ONE_THREAD_RUNTIME
-    return True
 
 
 class BusError(RuntimeError):

@@ -1,10 +1,8 @@
-"""`sme bench scale`'s summary against its targets, the echo program's stand-in learner work, and the
-worlds' zenoh runtime default."""
+"""`sme bench scale`'s summary against its targets, and the echo program's stand-in learner work."""
 
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import time
@@ -12,7 +10,6 @@ import time
 import numpy as np
 
 from sensorimotor.agent.programs.base import EchoProgram
-from sensorimotor.protocol.bus import ONE_THREAD_RUNTIME, prefer_one_runtime_thread
 from sensorimotor.protocol.messages import Observation
 from sensorimotor.tools.bench.scale import summarize
 from sensorimotor.worlds.bench import BenchWorld
@@ -53,27 +50,18 @@ def test_echo_work_us_spends_that_much_cpu_per_answer():
     assert t2 - t1 >= 5 * 3000e-6 and t1 - t0 < 5 * 3000e-6 / 10
 
 
-def test_summary_reports_each_ping_pong_baseline_the_worlds_cpu_and_the_gap():
-    row = {**_row(1, 1, 2400, 0.5, 4000), "over_pingpong_world_runtime": 0.55}
+def test_summary_reports_the_worlds_cpu_and_the_gap():
+    row = _row(1, 1, 2400, 0.5, 4000)
     by = {(1, 1): [row], (1, 8): [{**_row(1, 8, 6000, 0.9), "world_cpu_cores": 1.15}], (2, 8): [_row(2, 8, 5000, 1.0)]}
     gaps = [{"bench": "gap", "world": "gridworld", "max_ms": 12.5}, {"bench": "gap", "world": "retina", "max_ms": 30.1}]
     s = summarize(by, [1, 8], 2, None, gaps)
     assert s["gridworld_max_gap_ms"] == 12.5 and s["targets"]["gridworld_max_gap_ms"] == 20.0
-    assert s["single_world_over_pingpong"] == 0.6 and s["single_world_over_pingpong_world_runtime"] == 0.55
+    assert s["single_world_over_pingpong"] == 0.6 and s["single_world_over_pingpong_callback"] == 0.4
     assert s["world_cpu_cores_at_8_worlds_workers_1"] == 1.15 and s["speedup_at_8_worlds"] == 0.83
 
 
-def test_one_runtime_thread_is_a_default_the_user_can_override(monkeypatch):
-    monkeypatch.delenv("ZENOH_RUNTIME", raising=False)
-    assert prefer_one_runtime_thread() and os.environ["ZENOH_RUNTIME"] == ONE_THREAD_RUNTIME
-    monkeypatch.setenv("ZENOH_RUNTIME", "(app: (worker_threads: 2))")
-    assert not prefer_one_runtime_thread() and os.environ["ZENOH_RUNTIME"] == "(app: (worker_threads: 2))"
-    monkeypatch.setenv("ZENOH_RUNTIME", " ")  # zenoh panics on an empty value: replaced
-    assert prefer_one_runtime_thread() and os.environ["ZENOH_RUNTIME"] == ONE_THREAD_RUNTIME
-
-
 def test_bench_scale_runs_end_to_end(tmp_path):
-    """A shortened `sme bench scale`: one world, one round, both ping-pong baselines (failover has its
+    """A shortened `sme bench scale`: one world, one round, the ping-pong baseline (failover has its
     own tests in test_owners.py)."""
     out = subprocess.run(
         [sys.executable, "-m", "sensorimotor.tools.cli", "bench", "scale", "--worlds", "1", "--rounds", "1"]
@@ -98,7 +86,5 @@ def test_bench_scale_runs_end_to_end(tmp_path):
     rows = [json.loads(line) for line in out.stdout.splitlines()]
     (scale,) = [r for r in rows if r["bench"] == "scale"]
     assert scale["steps_per_s"] > 100 and scale["world_cpu_cores"] > 0
-    assert scale["pingpong"]["ping_runtime"] == "default"
-    assert scale["pingpong_world_runtime"]["ping_runtime"] == ONE_THREAD_RUNTIME
     assert scale["pingpong"]["round_trips_per_s"] > 100 and scale["over_pingpong"] > 0
     assert rows[-1]["bench"] == "scale-summary" and rows[-1]["single_world_steps_per_s"] == scale["steps_per_s"]

@@ -7,13 +7,7 @@ import json
 import logging
 import sys
 
-from sensorimotor.protocol.bus import (
-    Bus,
-    BusError,
-    add_bus_arguments,
-    bus_config_from_args,
-    prefer_one_runtime_thread,
-)
+from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.params import ParamError, assignments, table_text
 from sensorimotor.worlds.node import WorldNode
 from sensorimotor.worlds.registry import GYM_PREFIX, WORLDS, make_world, world_kind
@@ -113,7 +107,6 @@ def main_args(args: argparse.Namespace) -> int:
     except ValueError as e:
         log.error("%s", e)
         return 2
-    prefer_one_runtime_thread()
     try:
         bus = Bus(bus_config_from_args(args, "world"))
     except BusError as e:

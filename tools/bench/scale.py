@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.protocol import codec, keys
-from sensorimotor.protocol.bus import ONE_THREAD_RUNTIME, Bus, BusConfig, BusError
+from sensorimotor.protocol.bus import Bus, BusConfig, BusError
 from sensorimotor.protocol.messages import Action, AgentStatus, Observation
 from sensorimotor.tools.bench import gap
 from sensorimotor.tools.common import free_port
@@ -218,7 +218,6 @@ def scale_rows(
                     pps = {}
                     if n == 1 and rounds > 0:
                         pps[""] = pingpong(obs_bytes, min(seconds, 5.0))
-                        pps["_world_runtime"] = pingpong(obs_bytes, min(seconds, 5.0), ONE_THREAD_RUNTIME)
                     samples: list[tuple[float, tuple[float, float] | None]] = []
                     stop = threading.Event()
                     sampler = threading.Thread(target=_sample_cpu, args=(samples, stop), daemon=True)
@@ -249,9 +248,7 @@ def _pong_side(ep: str, ready: Any, pong_bytes: int) -> None:
         time.sleep(3600)
 
 
-def _ping_side(ep: str, seconds: float, obs: bytes, runtime: str | None, out: Any) -> None:
-    if runtime:
-        os.environ["ZENOH_RUNTIME"] = runtime  # before this process opens its first session
+def _ping_side(ep: str, seconds: float, obs: bytes, out: Any) -> None:
     with Bus(BusConfig.for_role("world", ep)) as bus:
         got = threading.Event()
         in_callback = threading.Event()
@@ -284,14 +281,13 @@ def _ping_side(ep: str, seconds: float, obs: bytes, runtime: str | None, out: An
     out.put((lat, stamps))
 
 
-def pingpong(obs_bytes: int, seconds: float, runtime: str | None = None) -> dict:
+def pingpong(obs_bytes: int, seconds: float) -> dict:
     """Raw zenoh round trips with the bench world's message sizes through a router, two ways for
     `seconds` each: a client process (like a world) puts an observation-sized ping and a router
     process answers an action-sized pong in its subscriber callback (as `sme agent --workers 1`
     does). The ping side either waits on its main thread for the pong (`round_trips_per_s`) or
     puts the next ping from its pong callback (`callback_round_trips_per_s`), as `sme world` does.
-    Both sides run zenoh's default runtime unless `runtime` (a `ZENOH_RUNTIME` value) is given for
-    the ping side, e.g. the one `sme world` uses (`bus.ONE_THREAD_RUNTIME`)."""
+    """
     obs = codec.encode(Observation("b0", 0, 1, 0, {"frame": np.zeros(obs_bytes // 4, np.float32)}, 0.0, False))
     act = codec.encode(Action("b0", 1, (0.0,)))
     ep = f"tcp/127.0.0.1:{free_port()}"
@@ -302,7 +298,7 @@ def pingpong(obs_bytes: int, seconds: float, runtime: str | None = None) -> dict
     peer.start()
     try:
         ready.wait(60)
-        pinger = ctx.Process(target=_ping_side, args=(ep, seconds, obs, runtime, out), daemon=True)
+        pinger = ctx.Process(target=_ping_side, args=(ep, seconds, obs, out), daemon=True)
         pinger.start()
         lat, stamps = out.get(timeout=2 * seconds + 60)
         pinger.join(10)
@@ -315,7 +311,6 @@ def pingpong(obs_bytes: int, seconds: float, runtime: str | None = None) -> dict
         "bench": "pingpong",
         "ping_bytes": len(obs),
         "pong_bytes": len(act),
-        "ping_runtime": runtime or "default",
         "round_trips_per_s": round(1e3 / float(lat_ms.mean()), 1) if lat_ms.size else 0.0,
         "p50_ms": round(float(np.percentile(lat_ms, 50)), 4) if lat_ms.size else None,
         "p99_ms": round(float(np.percentile(lat_ms, 99)), 4) if lat_ms.size else None,
@@ -472,13 +467,6 @@ def _print(r: dict) -> None:
                 f"{pp['round_trips_per_s']:,.0f} round trips/s waiting on the main thread "
                 f"(one world: {r['over_pingpong']:.0%}), {pp['callback_round_trips_per_s']:,.0f} answering in "
                 f"the callback ({r['over_pingpong_callback']:.0%})"
-            )
-        if "pingpong_world_runtime" in r:
-            pp = r["pingpong_world_runtime"]
-            print(
-                f"  the same with the ping side on the worlds' one-thread zenoh runtime: "
-                f"{pp['round_trips_per_s']:,.0f} ({r['over_pingpong_world_runtime']:.0%}) and "
-                f"{pp['callback_round_trips_per_s']:,.0f} ({r['over_pingpong_world_runtime_callback']:.0%})"
             )
     elif r["bench"] == "gap":
         print(
