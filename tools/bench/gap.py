@@ -98,7 +98,8 @@ def run_mode(mode: str, seconds: float, retina_embed_every: int, warmup: int) ->
             for kind in WORLDS:
                 cmd = [sys.executable, "-m", "sensorimotor.tools.cli", "world", kind, "--id", f"gap-{kind}"]
                 cmd += ["--seconds", str(seconds), "--warmup", str(warmup), "--stats-json", os.path.join(tmp, kind)]
-                procs[kind] = subprocess.Popen([*cmd, "--connect", ep, "-q"])
+                # stdout stays clean for --json: PyBullet's C code prints its build time there
+                procs[kind] = subprocess.Popen([*cmd, "--connect", ep, "-q"], stdout=subprocess.DEVNULL)
             try:
                 for p in procs.values():
                     p.wait(timeout=seconds + 120)
