@@ -215,9 +215,7 @@ def scale_rows(
             for n in counts:
                 pairs = rounds if n == 1 and rounds > 0 else 1
                 for _ in range(pairs):
-                    pps = {}
-                    if n == 1 and rounds > 0:
-                        pps[""] = pingpong(obs_bytes, min(seconds, 5.0))
+                    pp = pingpong(obs_bytes, min(seconds, 5.0)) if n == 1 and rounds > 0 else None
                     samples: list[tuple[float, tuple[float, float] | None]] = []
                     stop = threading.Event()
                     sampler = threading.Thread(target=_sample_cpu, args=(samples, stop), daemon=True)
@@ -227,10 +225,10 @@ def scale_rows(
                     sampler.join()
                     row = _row(workers, n, obs_bytes, stats, _busy_mid(samples))
                     row["agent_work_us"] = work_us
-                    for tag, pp in pps.items():
-                        row[f"pingpong{tag}"] = pp
+                    if pp is not None:
+                        row["pingpong"] = pp
                         for way, field in (("", "round_trips_per_s"), ("_callback", "callback_round_trips_per_s")):
-                            row[f"over_pingpong{tag}{way}"] = round(row["steps_per_s"] / max(pp[field], 1e-9), 3)
+                            row[f"over_pingpong{way}"] = round(row["steps_per_s"] / max(pp[field], 1e-9), 3)
                     rows.append(row)
                     if emit is not None:
                         emit(row)
