@@ -266,7 +266,8 @@ class WorldNode:
             if self._t_warm is None:
                 self._t_warm, self._cpu_warm = now, time.process_time()
             st.measured_steps += 1
-        self._apply_controls()
+        if self._controls:  # (most steps have none: no lock taken on the hot path)
+            self._apply_controls()
         episode = lock.episode
         refused = lock.advance(act)
         if refused is not None:
@@ -274,17 +275,17 @@ class WorldNode:
             self._world_event(refused)
         st.episodes += lock.episode - episode
         st.steps += 1
-        self._data = self._publish(self._pub, lock)
+        self._data = self._publish(lock)
         self._sent = self._put_at = time.perf_counter()
         if (self.max_steps is not None and st.steps >= self.max_steps) or (
             self.seconds is not None and self._sent - self._t0 >= self.seconds
         ):
             self.stop_event.set()
 
-    def _publish(self, pub, lock: Lockstep) -> bytes:
+    def _publish(self, lock: Lockstep) -> bytes:
         now = time.time()
         data = codec.encode(lock.observation(now))
-        pub.put(data)
+        self._pub.put(data)
         self.stats.published += 1
         if self._image_pub is not None and lock.step % self.image_every == 0:
             frame = self.world.frame()
@@ -342,7 +343,7 @@ class WorldNode:
         with self._cv:
             self._t0 = time.perf_counter()
             lock = Lockstep(self.world, wid, self.session)
-            self._data = self._publish(pub, lock)
+            self._data = self._publish(lock)
             self._sent = self._put_at = time.perf_counter()
             self._lock_step = lock
             while not self.stop_event.is_set():
