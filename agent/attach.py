@@ -160,7 +160,8 @@ def attach(
     link.event(
         EventKind.ATTACHED,
         f"{spec.kind} with program {program.name} ({how}"
-        + (f" at embedding v{version})" if how == "restored" else ")"),
+        + (f" at embedding v{version})" if how == "restored" else ")")
+        + (f": {program.describe()}" if program.describe() else ""),
         reason=how,
         config=cfg,
     )

@@ -134,6 +134,7 @@ def _enc_spec(x: m.WorldSpec) -> pb.WorldSpec:
         program=x.program,
         n_starts=x.n_starts,
         session=x.session,
+        goal="" if x.goal == m.GoalRule.REWARD else str(x.goal),
     )
     for s in x.sensors:
         p.sensors.add(
@@ -161,6 +162,8 @@ def _enc_obs(x: m.Observation) -> pb.Observation:
         done=x.done,
         start=x.start,
         session=x.session,
+        truncated=x.truncated,
+        success=x.success,
     )
     _tensors_to_pb(x.tensors, p.tensors)
     return p
@@ -317,6 +320,11 @@ def _dec_spec(p: pb.WorldSpec) -> m.WorldSpec:
             raise errors.MalformedMessage(f"WorldSpec action_space: low {lo} > high {hi}")
     _not_nan(p.reward_min, "WorldSpec reward_min")
     _not_nan(p.reward_max, "WorldSpec reward_max")
+    goal = p.goal or m.GoalRule.REWARD
+    if goal not in tuple(m.GoalRule):
+        raise errors.MalformedMessage(
+            f"WorldSpec goal {p.goal[:40]!r} is not one of {', '.join(r.value for r in m.GoalRule)}"
+        )
     return m.WorldSpec(
         world_id=p.world_id,
         kind=p.kind,
@@ -328,6 +336,7 @@ def _dec_spec(p: pb.WorldSpec) -> m.WorldSpec:
         n_starts=p.n_starts,
         params=dict(p.params),
         session=p.session,
+        goal=m.GoalRule(goal),
     )
 
 
@@ -344,6 +353,8 @@ def _dec_obs(p: pb.Observation) -> m.Observation:
         start=p.start,
         timestamp=p.timestamp,
         session=p.session,
+        truncated=p.truncated,
+        success=p.success,
     )
 
 

@@ -42,6 +42,15 @@ class Trigger(StrEnum):
     POLICY_MAP = "policy_map"  # clustered traces of a trained policy (ch. 9.6), `labels` per row
 
 
+class GoalRule(StrEnum):
+    """How a world's goal is recognised (`WorldSpec.goal`): what ends a trace as a success."""
+
+    REWARD = "reward"  # a positive reward (the dissertation's worlds)
+    TERMINATED = "terminated"  # the episode ended on a terminal state, not by a time limit (Gymnasium)
+    SUCCESS = "success"  # the observation's success flag (panda-gym's, Gymnasium-Robotics' is_success)
+    NONE = "none"  # no goal state (CartPole, Pendulum: their terminations are failures or never come)
+
+
 class WorldEventKind(StrEnum):
     """The `kind` of a WorldEvent."""
 
@@ -130,6 +139,9 @@ class WorldSpec:
         The world's parameters as exact ``k=v`` strings.
     session : str
         A random string per world process start (a new one means the world restarted).
+    goal : str
+        How the goal is recognised, a `GoalRule` token: ``reward`` (a positive reward),
+        ``terminated`` (done and not truncated) or ``success`` (the observation's success flag).
     """
 
     world_id: str
@@ -142,6 +154,7 @@ class WorldSpec:
     n_starts: int = 0
     params: dict[str, str] = field(default_factory=dict)
     session: str = ""
+    goal: str = GoalRule.REWARD
 
     def sensor(self, name: str) -> SensorSpec:
         """The sensor called `name` (KeyError naming the world if there is none)."""
@@ -177,6 +190,10 @@ class Observation:
         Seconds since the epoch.
     session : str
         The world process's session (see `WorldSpec.session`).
+    truncated : bool
+        ``done`` because of a time limit, not a terminal state.
+    success : bool
+        The world's own success flag (goal rule ``success``).
     """
 
     world_id: str
@@ -189,6 +206,8 @@ class Observation:
     start: int = -1
     timestamp: float = 0.0
     session: str = ""
+    truncated: bool = False
+    success: bool = False
 
 
 @dataclass(frozen=True)

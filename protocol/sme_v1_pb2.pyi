@@ -47,7 +47,7 @@ class ActionSpace(_message.Message):
     def __init__(self, discrete_n: _Optional[int] = ..., low: _Optional[_Iterable[float]] = ..., high: _Optional[_Iterable[float]] = ..., names: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class WorldSpec(_message.Message):
-    __slots__ = ("schema_version", "world_id", "kind", "sensors", "action_space", "reward_min", "reward_max", "program", "n_starts", "params", "session")
+    __slots__ = ("schema_version", "world_id", "kind", "sensors", "action_space", "reward_min", "reward_max", "program", "n_starts", "params", "session", "goal")
     class ParamsEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -66,6 +66,7 @@ class WorldSpec(_message.Message):
     N_STARTS_FIELD_NUMBER: _ClassVar[int]
     PARAMS_FIELD_NUMBER: _ClassVar[int]
     SESSION_FIELD_NUMBER: _ClassVar[int]
+    GOAL_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     world_id: str
     kind: str
@@ -77,10 +78,11 @@ class WorldSpec(_message.Message):
     n_starts: int
     params: _containers.ScalarMap[str, str]
     session: str
-    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., sensors: _Optional[_Iterable[_Union[SensorSpec, _Mapping]]] = ..., action_space: _Optional[_Union[ActionSpace, _Mapping]] = ..., reward_min: _Optional[float] = ..., reward_max: _Optional[float] = ..., program: _Optional[str] = ..., n_starts: _Optional[int] = ..., params: _Optional[_Mapping[str, str]] = ..., session: _Optional[str] = ...) -> None: ...
+    goal: str
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., sensors: _Optional[_Iterable[_Union[SensorSpec, _Mapping]]] = ..., action_space: _Optional[_Union[ActionSpace, _Mapping]] = ..., reward_min: _Optional[float] = ..., reward_max: _Optional[float] = ..., program: _Optional[str] = ..., n_starts: _Optional[int] = ..., params: _Optional[_Mapping[str, str]] = ..., session: _Optional[str] = ..., goal: _Optional[str] = ...) -> None: ...
 
 class Observation(_message.Message):
-    __slots__ = ("schema_version", "world_id", "episode", "step", "t", "timestamp", "tensors", "reward", "done", "start", "session")
+    __slots__ = ("schema_version", "world_id", "episode", "step", "t", "timestamp", "tensors", "reward", "done", "start", "session", "truncated", "success")
     SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
     WORLD_ID_FIELD_NUMBER: _ClassVar[int]
     EPISODE_FIELD_NUMBER: _ClassVar[int]
@@ -92,6 +94,8 @@ class Observation(_message.Message):
     DONE_FIELD_NUMBER: _ClassVar[int]
     START_FIELD_NUMBER: _ClassVar[int]
     SESSION_FIELD_NUMBER: _ClassVar[int]
+    TRUNCATED_FIELD_NUMBER: _ClassVar[int]
+    SUCCESS_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     world_id: str
     episode: int
@@ -103,7 +107,9 @@ class Observation(_message.Message):
     done: bool
     start: int
     session: str
-    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., episode: _Optional[int] = ..., step: _Optional[int] = ..., t: _Optional[int] = ..., timestamp: _Optional[float] = ..., tensors: _Optional[_Iterable[_Union[Tensor, _Mapping]]] = ..., reward: _Optional[float] = ..., done: _Optional[bool] = ..., start: _Optional[int] = ..., session: _Optional[str] = ...) -> None: ...
+    truncated: bool
+    success: bool
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., episode: _Optional[int] = ..., step: _Optional[int] = ..., t: _Optional[int] = ..., timestamp: _Optional[float] = ..., tensors: _Optional[_Iterable[_Union[Tensor, _Mapping]]] = ..., reward: _Optional[float] = ..., done: _Optional[bool] = ..., start: _Optional[int] = ..., session: _Optional[str] = ..., truncated: _Optional[bool] = ..., success: _Optional[bool] = ...) -> None: ...
 
 class Action(_message.Message):
     __slots__ = ("schema_version", "world_id", "step", "values", "reset", "start", "timestamp")

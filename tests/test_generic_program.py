@@ -77,7 +77,7 @@ def test_generic_program_embeds_a_world_it_has_never_seen():
     assert isinstance(program, GenericProgram) and not program.tabular
     run = run_inprocess(world, program, 5_000)
     errors = [e for e in run.errors if e is not None]
-    assert len(errors) >= 10, run.outputs
+    assert len(errors) >= 6, run.outputs  # worse policies than the accepted one are not published
     assert errors[0] > 0.3 and max(errors[-5:]) < 0.05, errors  # the map improves as the policy does
 
 

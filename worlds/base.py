@@ -28,12 +28,18 @@ class StepResult:
         Whether the episode ended.
     info : dict
         Extra information for the caller (never sent on the bus).
+    truncated : bool
+        `done` because of a time limit, not a terminal state (sent as `Observation.truncated`).
+    success : bool
+        The world's own success flag (sent as `Observation.success`; goal rule ``success``).
     """
 
     tensors: dict[str, np.ndarray]
     reward: float = 0.0
     done: bool = False
     info: dict[str, Any] = field(default_factory=dict)
+    truncated: bool = False
+    success: bool = False
 
 
 class PerturbationError(ValueError):

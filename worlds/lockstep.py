@@ -76,6 +76,8 @@ class Lockstep:
             self.start,
             timestamp,
             self.session,
+            bool(r.truncated),
+            bool(r.success),
         )
 
     def _reset(self, start: int) -> None:

@@ -87,6 +87,7 @@ def trace_distances(
     pad: str = "append",
     substitution_cost: int = 1,
     dtype: DTypeLike = np.float64,
+    dtw_penalty: float = 0.0,
 ) -> np.ndarray:
     """The n x n matrix of pairwise trace distances (zero diagonal, symmetric).
 
@@ -104,6 +105,9 @@ def trace_distances(
         Edit-distance cost of a substitution (2: the indel/LCS distance).
     dtype : dtype-like, default np.float64
         Element type of the result (`np.float32` halves its memory).
+    dtw_penalty : float, default 0.0
+        "dtw": cost of each off-diagonal move (plain DTW repeats a step for free; a penalty keeps
+        the difference of trace lengths in the distance).
 
     Returns
     -------
@@ -124,7 +128,7 @@ def trace_distances(
         arrs = _as_2d(traces)
         X, lens = pad_traces(arrs), np.array([a.shape[0] for a in arrs])
         out = np.zeros((len(arrs), len(arrs)), dtype=dtype)
-        K.dtw_cross(X, lens, X, lens, out, symmetric=True)
+        K.dtw_cross(X, lens, X, lens, out, symmetric=True, penalty=dtw_penalty)
         return out
     X = pad_traces(traces, pad)
     out = np.empty((X.shape[0], X.shape[0]), dtype=dtype)

@@ -37,8 +37,10 @@ def padded_sum_cross_numpy(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> Non
         out += cdist(A[:, t, :], B[:, t, :]).astype(out.dtype, copy=False)
 
 
-def dtw_numpy(a: np.ndarray, b: np.ndarray) -> float:
-    """Reference DTW distance of two unpadded traces [la, d] and [lb, d] (numpy)."""
+def dtw_numpy(a: np.ndarray, b: np.ndarray, penalty: float = 0.0) -> float:
+    """Reference DTW distance of two unpadded traces [la, d] and [lb, d] (numpy); `penalty` is
+    added for every step that repeats an action of one trace (a move off the diagonal), so that
+    trace length stays in the cost."""
     n, m = len(a), len(b)
     if n == 0 or m == 0:
         return float(np.linalg.norm(a, axis=1).sum() + np.linalg.norm(b, axis=1).sum())
@@ -47,7 +49,7 @@ def dtw_numpy(a: np.ndarray, b: np.ndarray) -> float:
     acc[0, 0] = 0.0
     for i in range(1, n + 1):
         for j in range(1, m + 1):
-            acc[i, j] = C[i - 1, j - 1] + min(acc[i - 1, j], acc[i, j - 1], acc[i - 1, j - 1])
+            acc[i, j] = C[i - 1, j - 1] + min(acc[i - 1, j] + penalty, acc[i, j - 1] + penalty, acc[i - 1, j - 1])
     return float(acc[n, m])
 
 
@@ -92,7 +94,7 @@ if HAVE_NUMBA:
                 out[i, j] = _pair_sum(A, i, B, j)
 
     @numba.njit(cache=True, nogil=True)
-    def _dtw(a, la, b, lb, buf):  # pragma: no cover - compiled
+    def _dtw(a, la, b, lb, buf, pen):  # pragma: no cover - compiled
         if la == 0 or lb == 0:
             s = 0.0
             for t in range(la):
@@ -114,9 +116,9 @@ if HAVE_NUMBA:
                 for c in range(d):
                     diff = a[i - 1, c] - b[j - 1, c]
                     acc += diff * diff
-                best = prev[j]
-                if cur[j - 1] < best:
-                    best = cur[j - 1]
+                best = prev[j] + pen
+                if cur[j - 1] + pen < best:
+                    best = cur[j - 1] + pen
                 if prev[j - 1] < best:
                     best = prev[j - 1]
                 cur[j] = np.sqrt(acc) + best
@@ -124,13 +126,13 @@ if HAVE_NUMBA:
         return prev[lb]
 
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def _dtw_cross(A, la, B, lb, out, symmetric):  # pragma: no cover - compiled
+    def _dtw_cross(A, la, B, lb, out, symmetric, pen):  # pragma: no cover - compiled
         na, nb = A.shape[0], B.shape[0]
         for i in numba.prange(na):
             buf = np.empty((2, B.shape[1] + 1))
             start = i + 1 if symmetric else 0
             for j in range(start, nb):
-                v = _dtw(A[i], la[i], B[j], lb[j], buf)
+                v = _dtw(A[i], la[i], B[j], lb[j], buf, pen)
                 out[i, j] = v
                 if symmetric:
                     out[j, i] = v
@@ -155,9 +157,16 @@ def padded_sum_cross(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
 
 
 def dtw_cross(
-    A: np.ndarray, la: np.ndarray, B: np.ndarray, lb: np.ndarray, out: np.ndarray, symmetric: bool = False
+    A: np.ndarray,
+    la: np.ndarray,
+    B: np.ndarray,
+    lb: np.ndarray,
+    out: np.ndarray,
+    symmetric: bool = False,
+    penalty: float = 0.0,
 ) -> None:
-    """Fill `out` with the DTW distances from A to B (true lengths la, lb); `symmetric` when A is B."""
+    """Fill `out` with the DTW distances from A to B (true lengths la, lb); `symmetric` when A is B;
+    `penalty` per off-diagonal move (see `dtw_numpy`)."""
     if HAVE_NUMBA:
         _dtw_cross(
             np.ascontiguousarray(A, dtype=np.float64),
@@ -166,8 +175,9 @@ def dtw_cross(
             lb.astype(np.int64),
             out,
             symmetric,
+            float(penalty),
         )
         return
     for i in range(A.shape[0]):
         for j in range(B.shape[0]):
-            out[i, j] = dtw_numpy(A[i, : la[i]], B[j, : lb[j]])
+            out[i, j] = dtw_numpy(A[i, : la[i]], B[j, : lb[j]], penalty)

@@ -12,6 +12,7 @@ from typing import Any, Protocol
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 
 class Basis(Protocol):
@@ -107,6 +108,9 @@ class LSPI:
         lspi.iterate()  # one policy-iteration step over all stored samples
         a = lspi.greedy(s)
     """
+
+    #: LSTD-Q systems with more features than this, when sparse (tables), are solved sparsely
+    SPARSE_SOLVE_ABOVE = 2000
 
     def __init__(
         self,
@@ -266,10 +270,14 @@ class LSPI:
         # dense features (RBFBasis) are an ndarray, sparse ones (TabularBasis) scipy sparse: mask terminal rows
         Phi2 = Phi2 * (~done)[:, None] if isinstance(Phi2, np.ndarray) else Phi2.multiply((~done)[:, None]).tocsr()
         Amat = Phi.T @ (Phi - self.gamma * Phi2)
-        Amat = Amat.toarray() if sp.issparse(Amat) else np.asarray(Amat)
         b = np.asarray(Phi.T @ R).reshape(-1)
-        Amat[np.diag_indices_from(Amat)] += self.ridge
-        w = np.linalg.solve(Amat, b)
+        if sp.issparse(Amat) and Amat.shape[0] > self.SPARSE_SOLVE_ABOVE:
+            # a large table (thousands of state-action pairs): a dense k x k solve would take GBs
+            w = spla.spsolve((Amat + self.ridge * sp.identity(Amat.shape[0])).tocsc(), b)
+        else:
+            Amat = Amat.toarray() if sp.issparse(Amat) else np.asarray(Amat)
+            Amat[np.diag_indices_from(Amat)] += self.ridge
+            w = np.linalg.solve(Amat, b)
         change = float(np.linalg.norm(w - self.w))
         self.w = w
         self.iterations += 1

@@ -26,9 +26,15 @@ class TileCoder:
         Cells per dimension and tiling.
     n_tilings : int, default 8
         Number of offset tilings (one active tile each).
+    memory : int or None, default None
+        When the tilings hold more tiles than this, tiles are hashed into `memory` weights
+        (Sutton's hashed tile coding: only the tiles a learner visits matter, so a 12-dimensional
+        box needs no 9^12 table; a collision shares one weight between two far-apart tiles).
     """
 
-    def __init__(self, low: ArrayLike, high: ArrayLike, tiles: int = 10, n_tilings: int = 8) -> None:
+    def __init__(
+        self, low: ArrayLike, high: ArrayLike, tiles: int = 10, n_tilings: int = 8, memory: int | None = None
+    ) -> None:
         self.low, self.high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         if self.low.shape != self.high.shape or not (self.high > self.low).all():
             raise ValueError("low/high must have the same shape and high > low")
@@ -38,6 +44,12 @@ class TileCoder:
         self.dims = self.low.size
         self.per_tiling = (tiles + 1) ** self.dims
         self.size = self.per_tiling * n_tilings
+        self.hashed = memory is not None and self.size > memory
+        if self.hashed:
+            assert memory is not None
+            self.size = int(memory)
+            # fixed odd multipliers (a multiplicative hash of the cell coordinates), the same on every run
+            self._mult = np.random.default_rng([self.dims, 8]).integers(1, 2**31, size=self.dims) * 2 + 1
         # tiling j is offset by j/n_tilings of a tile, with a different stride per dimension
         self._offsets = (np.arange(n_tilings)[:, None] * (1 + 2 * np.arange(self.dims))[None, :] / n_tilings) % 1.0
         self._strides = (tiles + 1) ** np.arange(self.dims)
@@ -47,6 +59,9 @@ class TileCoder:
         s = (np.clip(np.asarray(state, dtype=np.float64), self.low, self.high) - self.low) / (self.high - self.low)
         cells = np.floor(s[None, :] * self.tiles + self._offsets).astype(np.int64)
         cells = np.minimum(cells, self.tiles)
+        if self.hashed:
+            h = (cells * self._mult).sum(axis=1) + np.arange(self.n_tilings) * 0x9E3779B1
+            return (h ^ (h >> 17)) % self.size
         return cells @ self._strides + np.arange(self.n_tilings) * self.per_tiling
 
 

@@ -173,6 +173,10 @@ class Program(abc.ABC):
             )
         )
 
+    def describe(self) -> str:
+        """How the program learns this world, for people (the attach event says it; "" if nothing to add)."""
+        return ""
+
     def world_restarted(self) -> None:
         """The world process restarted (new session): an episode in progress is gone."""
 

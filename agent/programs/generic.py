@@ -1,24 +1,43 @@
-"""The generic developmental program (the recipe of ch. 6, for any world): learn toward the
-world's reward with LSPI over features of the raw observations, run the greedy policy from every
-start state the world declares, embed the action traces.
+"""The generic developmental program (the recipe of ch. 6, for any world): learn to reach the
+world's goal, run the greedy policy from every start state the world declares, embed the action
+traces.
 
-Features: an observation that is one integer sensor with few values is a state id (tabular, as in
-the gridworld of ch. 5); anything else is flattened, scaled by the sensors' declared ranges,
-randomly projected to at most `projection` dimensions (fixed, seeded: keeps memory bounded for
-images), reduced by PCA fitted on a reservoir sample of every observation seen so far, and fed
-through Gaussian radial basis functions placed by farthest-point sampling (ch. 6: PCA + RBF).
-Box action spaces are discretised into `action_levels` values per dimension; their traces are
-compared with the padded sum (continuous actions), discrete ones with the edit distance.
+Success is what the world declares (`WorldSpec.goal`, see `agent.programs.goal`): a positive
+reward, a terminal state that is not a time limit, or the world's success flag. Every learner
+learns the shortest way to that goal (reward 1 at the goal and 0 elsewhere for LSPI, a cost of 1
+per step for Sarsa); a termination that is not the goal is a failure, worth as little as never
+arriving; a truncation is neither.
 
-Phases alternate: *explore* (random actions, samples stored) until `samples_per_iteration` new
-samples, then features are refitted and LSPI iterates; *embed*: the greedy policy from each start
-state (`StartStateSweep`), trace distances, classical MDS, Embedding vN. Each finished trace's score
-(gamma^length when it reached a reward, else 0) feeds the drop detector; on a drop the samples are
-dropped, the policy relearned from fresh experience and the next embedding says `relearned`.
+The learner follows the observation (`learner=auto`; the attach event says which):
 
-The feature refit + policy iteration and the distances + MDS run off the act path
-(`agent.programs.background`), each swapped in `learn_lag` acts after it starts; the program
-explores meanwhile (those samples count toward the next iteration).
+* ``tabular`` - one integer sensor with few values is a state id (the gridworld of ch. 5); integer
+  sensors with at most `symbol_values` values each (a symbolic grid such as MiniGrid's) are
+  tabulated by distinct observation. LSPI over the table, random exploration.
+* ``sarsa`` - a continuous observation of at most `sarsa_max_dims` values: tile-coded Sarsa(lambda)
+  with optimistic initial values (the classic mountain-car recipe, ch. 8's CMAC; hashed tiles above
+  `memory`), which explores toward sparse goals by itself.
+* ``lspi`` - anything else (images, long vectors): flattened, scaled by the sensors' ranges,
+  randomly projected to at most `projection` dimensions, reduced by PCA fitted on a reservoir
+  sample, fed through Gaussian radial basis functions (ch. 6: PCA + RBF), LSPI over random samples.
+
+Box action spaces are discretised into `action_levels` values per dimension; their traces are the
+continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time warping
+(`distance=dtw`, with a cost per repeated step so trace length stays in it). Discrete traces are
+compared with the edit distance.
+
+A world whose transitions are seen to be stochastic (the same observation and action led to
+different observations) is embedded from `samples` traces per start state with the ch. 9.4
+estimators (`estimator`: the mode trace or the mean pairwise distance); the embedding says so.
+
+Phases alternate: *learn* until `samples_per_iteration` new samples (LSPI: then features are
+refitted and LSPI iterates off the act path) or `embed_every` steps (Sarsa, which learns on every
+step); *embed*: the greedy policy from each start state (`StartStateSweep`), trace distances,
+classical MDS, Embedding vN. Once a sweep reaches the goal from `watch_after` of the starts the
+policy is *accepted*; after that a new policy is embedded only when its sweep is as good (as many
+goals, traces no longer), else the accepted policy is swept again - so embeddings hold once
+learned, and the drop detector sees only the accepted policy's trace scores (gamma^length at the
+goal, else 0), never the program's own experiments. On a drop the samples and policy are dropped,
+the policy relearned from fresh experience and the next embedding says `relearned`.
 """
 
 from __future__ import annotations
@@ -31,24 +50,38 @@ import numpy as np
 import scipy.sparse as sp
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
+from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mode_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
+from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.agent.programs.goal import failed, reached
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 from sensorimotor.protocol.params import option, parse
+
+LEARNERS = ("auto", "tabular", "lspi", "sarsa")
 
 
 @dataclass(frozen=True)
 class GenericProgramParams:
     """Hyperparameters of the generic program (ch. 6 recipe)."""
 
-    samples_per_iteration: int = option(500, "new random-action samples between policy iterations", min=1)
+    learner: str = option(
+        "auto", "auto (by the observation: see the module docstring), tabular, lspi or sarsa", choices=LEARNERS
+    )
+    samples_per_iteration: int = option(500, "tabular/lspi: new random-action samples between policy iterations", min=1)
     lspi_iterations: int = option(8, "at most this many LSPI iterations after each exploration phase", min=1)
-    max_trace: int = option(60, "longest greedy trace recorded from a start state", min=1)
+    max_trace: int = option(
+        0,
+        "longest greedy trace recorded from a start state (0: the world's episode limit, at most 250; else 60)",
+        min=0,
+    )
     gamma: float = option(0.9, "LSPI discount", min=0.0, max=0.999)
     ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
-    dims: int = option(2, "embedding dimensions (classical MDS)", min=1)
+    dims: int = option(
+        0, "embedding dimensions (0: the truth's, as the world declares it in `truth_dims`, else 2)", min=0
+    )
     components: int = option(8, "PCA components of the observations", min=1)
     centres: int = option(60, "radial basis functions in the PCA space", min=1)
     width: float = option(1.0, "RBF width, in units of the median spacing of the centres", min=0.01)
@@ -56,9 +89,41 @@ class GenericProgramParams:
     reservoir: int = option(1000, "observations kept (a uniform sample of all seen) to fit PCA and centres", min=10)
     max_samples: int = option(5000, "LSPI samples kept (the newest)", min=10)
     max_categories: int = option(4096, "an integer sensor with at most this many values is a state id", min=2)
+    symbol_values: int = option(
+        32, "integer sensors with at most this many values each are tabulated by distinct observation", min=2
+    )
+    table_size: int = option(2048, "distinct observations a table holds (later ones share its last row)", min=2)
+    sarsa_max_dims: int = option(
+        6, "learner=auto: continuous observations of at most this many values use Sarsa", min=1
+    )
+    tiles: int = option(8, "Sarsa: tiles per dimension and tiling", min=1)
+    tilings: int = option(8, "Sarsa: offset tilings", min=1)
+    memory: int = option(1 << 18, "Sarsa: weights per action; more tiles than this are hashed", min=64)
+    alpha: float = option(0.3, "Sarsa step size (shared by the tilings)", min=1e-6, max=1.0)
+    lam: float = option(0.9, "Sarsa trace decay lambda", min=0.0, max=1.0)
+    sarsa_gamma: float = option(
+        0.99, "Sarsa discount (a failure is worth -1 / (1 - gamma), as never arriving)", min=0.5, max=0.9999
+    )
+    epsilon: float = option(
+        0.0, "Sarsa exploration rate (optimistic initial values explore without it)", min=0.0, max=1.0
+    )
+    embed_every: int = option(5000, "Sarsa: learning steps between embedding sweeps", min=1)
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
+    distance: str = option(
+        "padded", "box actions: padded sum (Eq 3.1) or dtw between the continuous traces", choices=("padded", "dtw")
+    )
+    dtw_penalty: float = option(
+        1.0, "distance=dtw: cost of each repeated step (keeps trace length in the distance)", min=0.0
+    )
+    samples: int = option(8, "traces per start state once the world is seen to be stochastic", min=2, max=100)
+    estimator: str = option(
+        "mode", "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4)", choices=("mode", "mean")
+    )
     watch_after: float = option(
-        0.9, "the drop detector watches once a sweep reaches the goal from this fraction of starts", min=0.0, max=1.0
+        0.9,
+        "a sweep that reaches the goal from this fraction of starts makes the policy accepted (watched)",
+        min=0.0,
+        max=1.0,
     )
     learn_lag: int = option(
         75,
@@ -213,16 +278,40 @@ def iterate_job(
     }
 
 
-def embed_job(traces: list[list[int]], actions: np.ndarray | None, dims: int) -> dict[str, Any]:
-    """Trace distances (edit distance of discrete actions; padded sum of the action values when
-    `actions` is the table of a discretised box) and classical MDS. A pure function, run off the act path."""
-    if actions is None:
-        D = trace_distances(traces, kind="edit", substitution_cost=2)
+def embed_job(
+    traces: list[list[list[int]]],
+    actions: np.ndarray | None,
+    dims: int,
+    estimator: str = "mode",
+    distance: str = "padded",
+    dtw_penalty: float = 1.0,
+) -> dict[str, Any]:
+    """Trace distances and classical MDS of each start's sampled traces (one sample each in a
+    deterministic world): edit distance of discrete actions; the padded sum or DTW of the action
+    values when `actions` is the table of a discretised box. Several samples: the mode trace, or
+    the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
+    if any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
+        D = mean_pair_distances(traces, substitution_cost=2)
     else:
-        table = np.asarray(actions)
-        D = trace_distances([table[np.asarray(t, dtype=np.int64)] for t in traces], kind="continuous")
+        canon = [list(mode_trace(t)) for t in traces]
+        if actions is None:
+            D = trace_distances(canon, kind="edit", substitution_cost=2)
+        else:
+            table = np.asarray(actions)
+            cont = [table[np.asarray(t, dtype=np.int64)].reshape(len(t), table.shape[1]) for t in canon]
+            if distance == "dtw":
+                D = trace_distances(cont, kind="dtw", dtw_penalty=dtw_penalty)
+            else:
+                D = trace_distances(cont, kind="continuous")
     mds = classical_mds(D, dims)
     return {"coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
+
+
+def _sweep_score(reached: list[bool], traces: list[list[int]]) -> tuple[float, float]:
+    """How good a sweep's policy is, without truth: the fraction of starts that reach the goal, and
+    the mean length of the traces that do (shorter is better: every learner learns shortest paths)."""
+    ok = [len(t) for t, r in zip(traces, reached, strict=True) if r]
+    return (len(ok) / max(1, len(traces)), float(np.mean(ok)) if ok else float("inf"))
 
 
 class GenericProgram(Program):
@@ -230,8 +319,10 @@ class GenericProgram(Program):
 
     name = "generic"
     Params = GenericProgramParams
-    _rbf: _RBFFeatures  # the LSPI basis when observations are not state ids
+    _rbf: _RBFFeatures  # the LSPI basis when observations are neither state ids nor symbols
     detector_params = {"warmup": 30, "rate": 0.05}
+    #: transitions remembered to tell a stochastic world (bounded memory)
+    TRANSITIONS = 50_000
 
     def __init__(
         self, spec: WorldSpec, seed: int = 0, params: GenericProgramParams | None = None, **overrides: Any
@@ -243,29 +334,67 @@ class GenericProgram(Program):
         self.actions = _action_table(spec, prm.action_levels)
         self.n_actions = self.actions.shape[0]
         self.discrete = spec.action_space.discrete
+        self.goal = str(spec.goal)
         s0 = spec.sensors[0]
-        self.tabular = (
+        ids = (
             len(spec.sensors) == 1
             and np.dtype(s0.dtype).kind in "iu"
             and int(np.prod(s0.shape)) == 1
             and 0 < s0.high - s0.low + 1 <= prm.max_categories
         )
+        symbols = all(
+            np.dtype(s.dtype).kind in "iub" and 0 <= s.high - s.low + 1 <= prm.symbol_values for s in spec.sensors
+        )
+        d = sum(int(np.prod(s.shape)) for s in spec.sensors)
+        learner = prm.learner
+        if learner == "auto":
+            learner = "tabular" if ids or symbols else "sarsa" if d <= prm.sarsa_max_dims else "lspi"
+        self.learner = learner
+        self.tabular = learner == "tabular"
+        self.keyed = self.tabular and not ids  # a table of distinct observations, not given state ids
+        self._ids: dict[bytes, int] = {}
+        self.stochastic = False
+        self._transitions: dict[tuple[bytes, int], tuple[bytes, bytes | None]] = {}
+        self._said_table_full = False
+        lo = np.concatenate([np.full(int(np.prod(s.shape)), s.low, float) for s in spec.sensors])
+        hi = np.concatenate([np.full(int(np.prod(s.shape)), s.high, float) for s in spec.sensors])
+        span = np.where(hi > lo, hi - lo, 1.0)
+        self._lo, self._span = lo, span
+        basis: Any
+        self.sarsa: SarsaLambda | None = None
         if self.tabular:
-            self.low = int(s0.low)
-            self.n_states = int(s0.high - s0.low) + 1
-            basis: Any = TabularBasis(self.n_states, self.n_actions)
+            if ids:
+                self.low = int(s0.low)
+                self.n_states = int(s0.high - s0.low) + 1
+            else:
+                self.low, self.n_states = 0, prm.table_size
+            basis = TabularBasis(self.n_states, self.n_actions)
+        elif learner == "sarsa":
+            self.n_states = 0
+            coder = TileCoder(np.zeros(d), np.ones(d), prm.tiles, prm.tilings, memory=prm.memory)
+            self.sarsa = SarsaLambda(
+                coder,
+                self.n_actions,
+                prm.alpha,
+                prm.sarsa_gamma,
+                prm.lam,
+                prm.epsilon,
+                seed=int(self.rng.integers(2**31)),
+            )
+            basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
         else:
-            d = sum(int(np.prod(s.shape)) for s in spec.sensors)
-            lo = np.concatenate([np.full(int(np.prod(s.shape)), s.low, float) for s in spec.sensors])
-            hi = np.concatenate([np.full(int(np.prod(s.shape)), s.high, float) for s in spec.sensors])
-            span = np.where(hi > lo, hi - lo, 1.0)
-            self._lo, self._span = lo, span
+            self.n_states = 0
             self.dim = min(d, prm.projection)
             proj_rng = np.random.default_rng([seed, 6])  # fixed per seed: stored vectors stay comparable
             self._proj = proj_rng.standard_normal((d, self.dim)) / np.sqrt(self.dim) if d > prm.projection else None
             self._store = np.zeros((2 * prm.max_samples + 2, self.dim), dtype=np.float32)
             self._reservoir = np.zeros((prm.reservoir, self.dim), dtype=np.float32)
             self._rbf = basis = _RBFFeatures(self._store, self.n_actions, prm.centres)
+        declared = spec.params.get("max_episode_steps", "")
+        limit = int(declared) if declared.isdigit() else 0
+        self.max_trace = prm.max_trace or (min(limit, 250) if limit > 0 else 60)
+        tdims = spec.params.get("truth_dims", "")
+        self.dims = prm.dims or (int(tdims) if tdims.isdigit() and int(tdims) > 0 else 2)
         self._next_id = 0
         self._seen = 0
         self._fitted_at = 0
@@ -274,33 +403,86 @@ class GenericProgram(Program):
         self.new_samples = 0
         self.relearn_at: int | None = None
         self._prev: tuple[int, int] | None = None
-        self._sweep = StartStateSweep(spec.n_starts, prm.max_trace)
+        self._prev_x: np.ndarray | None = None  # Sarsa: the previous observation's scaled vector
+        self._prev_key: bytes | None = None
+        self._sweep = self._new_sweep()
         self._visited: set[tuple[bytes, int]] = set()
         self._perf: list[float] = []
         self._said_no_starts = False
         self._watching = False  # the detector sees trace scores only once the policy is good
+        self._accepted: np.ndarray | None = None  # the accepted policy's weights (see the module docstring)
+        self._best: tuple[float, float] | None = None
+        self._checking = False  # this sweep runs the accepted policy, not the newest one
+        self._sweep_w: np.ndarray | None = None  # the weights the sweep in progress follows
+        self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
+        self._sweep_rbf: _RBFFeatures | None = None  # that basis while the accepted policy is swept
+        self._diverged = False  # the trace in progress left the accepted policy's choices
+        self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
         self.use_background(prm.learn_lag)
 
+    def describe(self) -> str:
+        """The learner chosen for the world's observation (said in the attach event)."""
+        what = {
+            "tabular": "a table of distinct observations" if self.keyed else "a table of state ids",
+            "sarsa": f"tile-coded Sarsa(lambda), {self.sarsa.coder.dims if self.sarsa else 0} values"
+            + (", hashed tiles" if self.sarsa and self.sarsa.coder.hashed else ""),
+            "lspi": "LSPI over PCA + RBF features",
+        }[self.learner]
+        return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
+
+    def _new_sweep(self) -> StartStateSweep:
+        k = self.params.samples if self.stochastic else 1
+        return StartStateSweep(self.spec.n_starts * k, self.max_trace, goal=lambda o: reached(self.goal, o), repeats=k)
+
     # observations -> states --------------------------------------------------------------------
     def _vector(self, obs: Observation) -> np.ndarray:
+        x = (self._flat(obs) - self._lo) / self._span
+        if self.learner == "lspi" and self._proj is not None:
+            return x @ self._proj
+        return x
+
+    def _flat(self, obs: Observation) -> np.ndarray:
         parts = []
         for s in self.spec.sensors:
             a = obs.tensors.get(s.name)
             if a is None:
                 raise SpecMismatch(f"observation step {obs.step} has no tensor {s.name!r}")
             parts.append(np.asarray(a, dtype=np.float64).reshape(-1))
-        x = (np.concatenate(parts) - self._lo) / self._span
-        return x @ self._proj if self._proj is not None else x
+        return np.concatenate(parts)
 
-    def _state(self, obs: Observation) -> int:
-        """The LSPI state of an observation met while exploring: a state id, or a new store id."""
-        if self.tabular:
+    def _table_id(self, obs: Observation) -> int:
+        """A table row: the state id, or the row of this distinct observation (new rows as met)."""
+        if not self.keyed:
             s = int(np.asarray(obs.tensors[self.spec.sensors[0].name]).reshape(-1)[0]) - self.low
             if not 0 <= s < self.n_states:
                 raise SpecMismatch(f"state id {s + self.low} outside the declared range")
             return s
+        key = self._key(obs)
+        i = self._ids.get(key)
+        if i is None:
+            i = len(self._ids)
+            if i >= self.n_states:
+                if not self._said_table_full:
+                    self._said_table_full = True
+                    self.emit(
+                        EventOutput(
+                            EventKind.POLICY_ITERATION,
+                            f"more than {self.n_states} distinct observations: later ones share the last row "
+                            "(raise generic.table_size)",
+                            obs.step,
+                            reason="table_full",
+                        )
+                    )
+                return self.n_states - 1
+            self._ids[key] = i
+        return i
+
+    def _state(self, obs: Observation) -> int:
+        """The LSPI state of an observation met while exploring: a table row, or a new store id."""
+        if self.tabular:
+            return self._table_id(obs)
         x = self._vector(obs)
         i = self._next_id
         self._next_id += 1
@@ -316,12 +498,59 @@ class GenericProgram(Program):
                 self._reservoir[j] = x
         return i
 
-    def _q(self, obs: Observation) -> np.ndarray:
-        w = self.lspi.w.reshape(self.n_actions, -1)
+    def _weights(self) -> np.ndarray:
+        return self.sarsa.w if self.sarsa is not None else self.lspi.w
+
+    def _q(self, obs: Observation, w: np.ndarray | None = None) -> np.ndarray:
+        if self.sarsa is not None:
+            tiles = self.sarsa.coder.active(self._vector(obs))
+            return (self.sarsa.w if w is None else w)[:, tiles].sum(axis=1)
+        w = self.lspi.w if w is None else w
         if self.tabular:
-            return self.lspi.q(self._state(obs))
-        f = self._rbf.features(self._vector(obs))[0]
-        return w @ f
+            return np.asarray(w).reshape(self.n_states, self.n_actions)[self._table_id(obs)]
+        rbf = self._sweep_rbf if self._sweep_rbf is not None else self._rbf
+        f = rbf.features(self._vector(obs))[0]
+        return w.reshape(self.n_actions, -1) @ f
+
+    def _goal_reward(self, obs: Observation) -> float:
+        return 1.0 if reached(self.goal, obs) else 0.0
+
+    def _terminal(self, obs: Observation) -> bool:
+        return reached(self.goal, obs) or failed(self.goal, obs)
+
+    def _note_transition(self, key: bytes, a: int, obs: Observation) -> None:
+        """Remember where (observation, action) led. Outcomes that alternate (the first comes back
+        after another, or a third appears) mean a stochastic world; one change that stays is a body
+        change, for the drop detector."""
+        if self.stochastic or obs.t == 0:
+            return
+        nxt = self._key(obs)
+        seen = self._transitions.get((key, a))
+        if seen is None:
+            if len(self._transitions) < self.TRANSITIONS:
+                self._transitions[(key, a)] = (nxt, None)
+            return
+        first, other = seen
+        if nxt == first and other is None:
+            return
+        if other is None:
+            # a second outcome may be a body change rather than chance: wait until the first one
+            # comes back (or a third appears)
+            self._transitions[(key, a)] = (first, nxt)
+            return
+        if nxt == other:
+            return
+        self.stochastic = True
+        self._transitions.clear()
+        self.emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"the world is stochastic (one observation and action led to different observations): "
+                f"{self.params.samples} traces per start state, {self.params.estimator} estimator",
+                obs.step,
+                reason="stochastic",
+            )
+        )
 
     # the program -------------------------------------------------------------------------------
     def _iterate(self) -> None:
@@ -365,26 +594,89 @@ class GenericProgram(Program):
         if not trace:
             self._visited = set()
         self._visited.add((self._key(obs), trace[-1] if trace else -1))
-        return self.lspi.choose(self._q(obs), trace[-1] if trace else None)
+        prefer = trace[-1] if trace else None
+        a = self.lspi.choose(self._q(obs, self._sweep_w), prefer)
+        if self._watching and not self._checking and self._accepted is not None and not self._diverged:
+            rbf, self._sweep_rbf = self._sweep_rbf, self._accepted_rbf()
+            try:
+                self._diverged = a != self.lspi.choose(self._q(obs, self._accepted), prefer)
+            finally:
+                self._sweep_rbf = rbf
+        return a
+
+    def _accepted_rbf(self) -> _RBFFeatures | None:
+        """The RBF basis the accepted weights are over, when it is not the current one."""
+        if self._accepted_basis is None:
+            return None
+        rbf = _RBFFeatures(self._store, self.n_actions, self.params.centres)
+        _set_basis(rbf, self._accepted_basis)
+        return rbf
 
     def _cycle(self, obs: Observation, trace: list[int]) -> bool:
         """A deterministic greedy policy that meets the same observation after the same action again
-        is in a loop that never ends: the trace stops there."""
-        return bool(trace) and (self._key(obs), trace[-1]) in self._visited
+        is in a loop that never ends: the trace stops there (not in a stochastic world, where the
+        next step may differ)."""
+        return bool(trace) and not self.stochastic and (self._key(obs), trace[-1]) in self._visited
 
-    def _embed(self, step: int, relearned: bool) -> None:
+    def _start_sweep(self, check: bool) -> Decision:
+        """Sweep the start states with the newest policy, or (`check`) with the accepted one."""
+        self._prev, self._prev_x, self._prev_key = None, None, None
+        self.phase = "embed"
+        self._checking = check
+        w = self._accepted if check and self._accepted is not None else self._weights()
+        self._sweep_w = np.array(w, copy=True)
+        self._sweep_rbf = self._accepted_rbf() if check else None
+        self._sweep = self._new_sweep()
+        self._diverged = False
+        self._unfed = []
+        # a random order: the detector then sees trace scores in no spatial order (a run of far
+        # starts, long traces, would look like a drop)
+        return self._sweep.begin([int(i) for i in self.rng.permutation(self.spec.n_starts)])
+
+    def _swept(self, step: int) -> Decision | None:
+        """A sweep finished: accept, publish, feed the detector, or sweep the accepted policy again."""
+        sw = self._sweep
+        k = sw.repeats
+        score = _sweep_score(sw.reached, sw.traces)
+        frac, length = score
+        good = frac >= self.params.watch_after
+        tol = 1.1 if self.stochastic else 1.0 + 1e-9
+        better = self._best is None or frac > self._best[0] or (frac == self._best[0] and length <= self._best[1] * tol)
+        self.phase = "explore"
+        if self._watching and not self._checking and not better and self._accepted is not None:
+            # the newest policy is worse than the accepted one: not published, not judged by the
+            # detector; the accepted policy is swept again, so that a changed world still shows
+            return self._start_sweep(check=True)
+        if self._watching or good:  # the scores not yet fed as their traces ended (see `_sweep_act`)
+            self._perf.extend(self._unfed)
+        relearned = good and self.relearn_at is not None
+        if not self._checking and (better or not self._watching):
+            self._accepted, self._best = np.array(self._sweep_w, copy=True), score
+            self._accepted_basis = None if self.learner != "lspi" else _basis_state(self._rbf)
+        self._watching = self._watching or good
+        self._embed(step, relearned, k)
+        self._checking = False
+        return None
+
+    def _embed(self, step: int, relearned: bool, k: int) -> None:
         """Start the distances + MDS job on the sweep's traces; `relearned`: the first good policy
         after a drop (the trigger will say so, with the drop's step)."""
         traces = [list(t) for t in self._sweep.traces]
-        n = len(traces)
+        n = len(traces) // k
+        per_start = [traces[i * k : (i + 1) * k] for i in range(n)]
         assert self.background is not None
+        prm = self.params
         self.background.submit(
             "embed",
             embed_job,
-            traces=traces,
+            traces=per_start,
             actions=None if self.discrete else self.actions.copy(),
-            dims=self.params.dims,
+            dims=self.dims,
+            estimator=prm.estimator,
+            distance=prm.distance,
+            dtw_penalty=prm.dtw_penalty,
         )
+        frac, length = _sweep_score(self._sweep.reached, traces)
         self._pending_embedding = {
             "step": step,
             "n": n,
@@ -393,9 +685,12 @@ class GenericProgram(Program):
             "iteration": self.lspi.iterations,
             "lspi_iterations": float(self.lspi.iterations),
             "samples": float(self.lspi.n_samples),
-            "goal_reached_fraction": self._sweep.rewarded / n,
+            "goal_reached_fraction": frac,
             "mean_trace_length": float(np.mean([len(t) for t in traces])),
             "rewarded": self._sweep.rewarded,
+            "samples_per_start": float(k),
+            "stochastic": float(self.stochastic),
+            "accepted_policy": float(self._checking),
         }
         if relearned:
             self.relearn_at = None
@@ -407,6 +702,15 @@ class GenericProgram(Program):
         self._pending_embedding = None
         n, step = int(p["n"]), int(p["step"])
         eig = np.asarray(result["eigenvalues"])
+        keys = (
+            "lspi_iterations",
+            "samples",
+            "goal_reached_fraction",
+            "mean_trace_length",
+            "samples_per_start",
+            "stochastic",
+            "accepted_policy",
+        )
         self.emit(
             EmbeddingOutput(
                 Trigger.RELEARNED if p["relearned"] else Trigger.POLICY_ITERATION,
@@ -414,7 +718,7 @@ class GenericProgram(Program):
                 np.asarray(result["coordinates"]),
                 tuple(float(e) for e in eig[: min(10, len(eig))]),
                 step,
-                {k: float(p[k]) for k in ("lspi_iterations", "samples", "goal_reached_fraction", "mean_trace_length")},
+                {k: float(p.get(k, 0.0)) for k in keys},
                 iteration=int(p["iteration"]),
                 drop_step=None if p["drop_step"] is None else int(p["drop_step"]),
             )
@@ -423,22 +727,75 @@ class GenericProgram(Program):
             self.emit(
                 EventOutput(
                     EventKind.RELEARNED,
-                    f"the policy reaches the goal again from {int(p['rewarded'])} of {n} starts",
+                    f"the policy reaches the goal again from {int(p['rewarded'])} of {n * int(p.get('samples_per_start', 1))} traces",
                     step,
                     {"drop_step": float(p["drop_step"] or 0)},
                 )
             )
 
+    def _no_starts(self, step: int) -> None:
+        if self.spec.n_starts < 2 and not self._said_no_starts:
+            self._said_no_starts = True
+            self.emit(
+                EventOutput(
+                    EventKind.POLICY_ITERATION,
+                    f"world declares {self.spec.n_starts} start states: it is learned, not embedded",
+                    step,
+                    reason="no_start_states",
+                )
+            )
+
+    def _learn_sarsa(self, obs: Observation) -> Decision:
+        """One on-policy step of Sarsa(lambda): cost 1 per step, 0 at the goal, a failure as never arriving."""
+        assert self.sarsa is not None
+        x = self._vector(obs)
+        key = self._key(obs)
+        if obs.t == 0:
+            self.sarsa.begin_episode()
+            self._prev_x = None
+        terminal = obs.t > 0 and self._terminal(obs)
+        a2: int | None = None if terminal or obs.done else self.sarsa.act(x)
+        if self._prev_x is not None and obs.t > 0:
+            pa = self._prev[1] if self._prev is not None else 0
+            if self._prev_key is not None:
+                self._note_transition(self._prev_key, pa, obs)
+            if terminal:
+                r = 0.0 if reached(self.goal, obs) else -1.0 / (1.0 - self.sarsa.gamma)
+                self.sarsa.learn_one(self._prev_x, pa, r, x, None)
+            else:
+                boot = a2 if a2 is not None else self.sarsa.greedy(x)  # a time limit: the state goes on
+                self.sarsa.learn_one(self._prev_x, pa, -1.0, x, boot)
+            self.new_samples += 1
+        self._prev_x, self._prev_key, self._prev = None, None, None
+        if self.new_samples >= self.params.embed_every:
+            self.new_samples = 0
+            self.lspi.iterations += 1  # sweeps of the Sarsa policy count as its iterations
+            if self.spec.n_starts >= 2:
+                return self._start_sweep(check=False)
+            self._no_starts(obs.step)
+        if obs.done:
+            return Decision(reset=True, start=-1)
+        assert a2 is not None
+        self._prev_x, self._prev_key, self._prev = x, key, (0, a2)
+        return Decision(tuple(float(v) for v in self.actions[a2]))
+
     def act(self, obs: Observation) -> Decision:
+        assert self.background is not None
+        if self.phase == "explore" and self.sarsa is not None:
+            for name, result in self.background.tick():
+                if name == "embed":
+                    self._embedded(result)
+            return self._learn_sarsa(obs)
         s: int | None = None
         if self.phase == "explore":
             s = self._state(obs)
             if obs.t > 0 and self._prev is not None:
                 ps, pa = self._prev
-                self.lspi.learn_one(ps, pa, obs.reward, s, obs.done)
+                if self._prev_key is not None:
+                    self._note_transition(self._prev_key, pa, obs)
+                self.lspi.learn_one(ps, pa, self._goal_reward(obs), s, self._terminal(obs))
                 self.new_samples += 1
-            self._prev = None
-        assert self.background is not None
+            self._prev, self._prev_key = None, None
         iterated = False
         for name, result in self.background.tick():
             if name == "embed":
@@ -449,43 +806,40 @@ class GenericProgram(Program):
         if self.phase == "explore":
             assert s is not None
             if iterated and self.spec.n_starts >= 2:
-                self._prev = None
-                self.phase = "embed"
-                self._sweep = StartStateSweep(self.spec.n_starts, self.params.max_trace)
-                return self._sweep.begin()
+                return self._start_sweep(check=False)
             if self.new_samples >= self.params.samples_per_iteration and not self.background.pending("lspi"):
                 self.new_samples = 0
                 self._iterate()
-                if self.spec.n_starts < 2 and not self._said_no_starts:
-                    self._said_no_starts = True
-                    self.emit(
-                        EventOutput(
-                            EventKind.POLICY_ITERATION,
-                            f"world declares {self.spec.n_starts} start states: it is learned, not embedded",
-                            obs.step,
-                            reason="no_start_states",
-                        )
-                    )
+                self._no_starts(obs.step)
             if obs.done:
                 return Decision(reset=True, start=-1)
             a = int(self.rng.integers(self.n_actions))
             self._prev = (s, a)
+            self._prev_key = self._key(obs)
             return Decision(tuple(float(v) for v in self.actions[a]))
+        return self._sweep_act(obs)
 
-        done_before = len(self._sweep.traces)
+    def _sweep_act(self, obs: Observation) -> Decision:
+        n_before = len(self._sweep.traces)
         dec = self._sweep.step(obs, self._choose, self._cycle)
-        if len(self._sweep.traces) > done_before:
-            trace = self._sweep.traces[-1]
-            reached = obs.reward > 0 or (obs.done and not trace)
-            if self._watching:
-                self._perf.append(self.params.gamma ** len(trace) if reached else 0.0)
-        elif not dec.reset:
+        if len(self._sweep.traces) > n_before:
+            # a trace ended: its score goes to the detector now when it is the accepted policy's own
+            # trace (a check sweep, or a newer policy that chose as the accepted one at every step),
+            # else only if the newer policy is accepted when the sweep ends
+            assert self._sweep.last is not None
+            trace, ok = self._sweep.last
+            score = self.lspi.gamma ** len(trace) if ok else 0.0
+            if self._watching and (self._checking or not self._diverged):
+                self._perf.append(score)
+            else:
+                self._unfed.append(score)
+            self._diverged = False
+        if not dec.reset:
             dec = Decision(tuple(float(v) for v in self.actions[int(dec.values[0])]))
         if self._sweep.finished:
-            good = self._sweep.rewarded >= self.params.watch_after * len(self._sweep.traces)
-            self._watching = self._watching or good
-            self._embed(obs.step, relearned=good and self.relearn_at is not None)
-            self.phase = "explore"
+            again = self._swept(obs.step)
+            if again is not None:
+                return again
         return dec
 
     def performance(self, obs: Observation) -> float | None:
@@ -495,19 +849,24 @@ class GenericProgram(Program):
         """The body changed: what was learned no longer holds; relearn from fresh samples."""
         self.relearn_at = step
         self.lspi.reset()
+        if self.sarsa is not None:
+            self.sarsa.reset()
         assert self.background is not None
         self.background.discard("lspi")  # an iteration over the dropped samples is never swapped in
         self.new_samples = 0
-        self._prev = None
+        self._prev, self._prev_x, self._prev_key = None, None, None
         self.phase = "explore"
         self._perf.clear()
         self._watching = False
+        self._accepted, self._best, self._checking = None, None, False
+        self._accepted_basis, self._sweep_rbf = None, None
+        self._transitions.clear()
         self.emit(
             EventOutput(EventKind.RELEARNING, "samples and policy dropped; relearning from fresh experience", step)
         )
 
     def world_restarted(self) -> None:
-        self._prev = None
+        self._prev, self._prev_x, self._prev_key = None, None, None
         self._sweep.interrupted()
         self._visited = set()
 
@@ -520,6 +879,8 @@ class GenericProgram(Program):
             "new_samples": self.new_samples,
             "relearn_at": self.relearn_at,
             "prev": None if self._prev is None else list(self._prev),
+            "prev_x": None if self._prev_x is None else self._prev_x.copy(),
+            "prev_key": None if self._prev_key is None else self._prev_key.hex(),
             "sweep": self._sweep.state(),
             "perf": list(self._perf),
             "next_id": self._next_id,
@@ -530,8 +891,20 @@ class GenericProgram(Program):
             "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
             # (observation, previous action) pairs met on the trace in progress: its cycle check
             "visited": sorted([key.hex(), a] for key, a in self._visited),
+            "stochastic": self.stochastic,
+            "ids": sorted([key.hex(), i] for key, i in self._ids.items()),
+            "accepted": None if self._accepted is None else self._accepted.copy(),
+            "best": None if self._best is None else [self._best[0], min(self._best[1], 1e300)],
+            "checking": self._checking,
+            "sweep_w": None if self._sweep_w is None else self._sweep_w.copy(),
+            "accepted_basis": self._accepted_basis,
+            "sweep_on_accepted_basis": self._sweep_rbf is not None,
+            "diverged": self._diverged,
+            "unfed": list(self._unfed),
         }
-        if not self.tabular:
+        if self.sarsa is not None:
+            out["sarsa"] = self.sarsa.state()
+        elif not self.tabular:
             out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=_basis_state(self._rbf))
         return out
 
@@ -541,7 +914,12 @@ class GenericProgram(Program):
         self.phase, self.new_samples = str(state["phase"]), int(state["new_samples"])
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
         self._prev = None if state["prev"] is None else (int(state["prev"][0]), int(state["prev"][1]))
-        self._sweep = StartStateSweep(self.spec.n_starts, self.params.max_trace)
+        px = state.get("prev_x")
+        self._prev_x = None if px is None else np.asarray(px, dtype=np.float64)
+        pk = state.get("prev_key")
+        self._prev_key = None if pk is None else bytes.fromhex(str(pk))
+        self.stochastic = bool(state.get("stochastic", False))
+        self._sweep = self._new_sweep()
         self._sweep.restore(state["sweep"])
         self._perf = [float(v) for v in state["perf"]]
         self._next_id, self._seen = int(state["next_id"]), int(state["seen_count"])
@@ -551,10 +929,25 @@ class GenericProgram(Program):
         pending = state.get("pending_embedding")
         self._pending_embedding = None if pending is None else dict(pending)
         self._visited = {(bytes.fromhex(str(h)), int(a)) for h, a in state.get("visited", [])}
-        if not self.tabular:
+        self._ids = {bytes.fromhex(str(h)): int(i) for h, i in state.get("ids", [])}
+        acc = state.get("accepted")
+        self._accepted = None if acc is None else np.asarray(acc, dtype=np.float64)
+        best = state.get("best")
+        self._best = None if best is None else (float(best[0]), float(best[1]))
+        self._checking = bool(state.get("checking", False))
+        sw = state.get("sweep_w")
+        self._sweep_w = None if sw is None else np.asarray(sw, dtype=np.float64)
+        ab = state.get("accepted_basis")
+        self._accepted_basis = None if ab is None else dict(ab)
+        self._sweep_rbf = self._accepted_rbf() if state.get("sweep_on_accepted_basis") else None
+        self._diverged = bool(state.get("diverged", False))
+        self._unfed = [float(v) for v in state.get("unfed", [])]
+        if self.sarsa is not None:
+            self.sarsa.restore(state["sarsa"])
+        elif not self.tabular:
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
             _set_basis(self._rbf, state["basis"])
 
 
-__all__ = ["GenericProgram", "GenericProgramParams"]
+__all__ = ["LEARNERS", "GenericProgram", "GenericProgramParams"]
