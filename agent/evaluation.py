@@ -20,6 +20,13 @@ def evaluate_embedding(output: EmbeddingOutput, truth: Truth | None) -> dict[str
     ids = np.asarray(output.ids, dtype=np.int64)
     if ids.size < 2 or ids.max(initial=-1) >= pos.shape[0] or ids.min(initial=0) < 0:
         return {}
+    coords = np.asarray(output.coordinates, dtype=np.float64)
+    if coords.ndim == 2 and np.ptp(coords, axis=0).max(initial=0.0) <= 1e-12 * max(
+        1.0, float(np.abs(coords).max(initial=0.0))
+    ):
+        # a map that puts every state at one point (e.g. every trace the same) says nothing: the
+        # worst Procrustes error, 1, rather than an undefined one
+        return {"procrustes_error": 1.0}
     out = {"procrustes_error": procrustes_error(pos[ids], output.coordinates)}
     if output.absolute and pos.shape[1] == output.coordinates.shape[1]:
         out["e_geometry"] = float(np.linalg.norm(output.coordinates - pos[ids], axis=1).mean())

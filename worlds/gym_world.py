@@ -1,20 +1,33 @@
-"""Any Gymnasium environment with discrete actions as a world: `sme world gym:ENV_ID`.
+"""Any Gymnasium environment as a world: `sme world gym:ENV_ID` (or `gym:module:ENV_ID`, which
+imports `module` first, as `gymnasium.make` does; MiniGrid and panda-gym ids are found without it).
 
-The environment's observation is the world's one sensor ``observation`` (a Discrete space: an int32
-state id; a Box: its values, as float32 or as they are for uint8 images; any other space: flattened
-by `gymnasium.spaces.flatten`). Actions are the environment's Discrete actions. The world asks for the
-generic program (ch. 6), which learns any world without world-specific code.
+Observations: a Discrete space is one int32 state id; a Box is its values (float32, or uint8 for
+images); a Dict serves each key as its own sensor (a key that cannot be flattened to numbers, such
+as MiniGrid's text `mission`, is left out with a warning); anything else is flattened.
+`observe=pixels` serves the rendered frame instead (`pixels` x `pixels` grey uint8), so a world
+whose state vector is its truth is learned from what a camera sees. Actions: Discrete, or a Box
+(the values the agent sends, clipped to the bounds). The world asks for the generic program (ch. 6).
 
-Start states and truth come from what the environment lets a world set:
+The goal (`WorldSpec.goal`, param `goal`): ``auto`` picks by family - a success flag where the
+environment reports ``is_success`` (panda-gym, Gymnasium-Robotics), a positive reward where
+terminations can be failures (FrozenLake's holes, MiniGrid's lava), ``terminated`` otherwise
+(MountainCar, Acrobot, CliffWalking, Taxi) and ``none`` for CartPole and Pendulum, which have no
+goal state.
 
-* toy-text grids (FrozenLake, CliffWalking, Taxi: a transition table ``P`` and a state ``s``): every
-  state reachable from the initial ones and not ended on entry (holes, the goal), truth the cell's
-  (row, col) (Taxi: its decoded tuple);
-* classic control whose ``unwrapped.state`` can be set (`STATE_GRIDS`: MountainCar, CartPole,
-  Acrobot): a `start_grid` x `start_grid` grid over two state variables, truth those variables, each
-  scaled to 0..1 over its grid (the raw values are the truth tensor ``state``);
-* anything else: no start states and no truth; the world says so in its log and its spec's
-  ``start_states`` parameter, and the generic program learns it without embedding it.
+Start states and truth come from the first of these that fits:
+
+* a hook on the environment (any wrapper layer or the unwrapped env; see `EmbeddableEnv`):
+  ``sme_start_states()``, ``sme_reset_to(start) -> observation``, ``sme_truth() -> [n, d]``, and
+  optionally ``sme_goal`` - for a user's own environment, with no change to this project;
+* toy-text grids (a transition table ``P`` and a state ``s``): every state reachable from the
+  initial ones and not ended on entry, truth the cell's (row, col) (Taxi: its decoded tuple);
+* classic control whose ``unwrapped.state`` can be set (`STATE_GRIDS`): a `start_grid` x
+  `start_grid` grid over two state variables, truth those variables scaled to 0..1;
+* MiniGrid: every empty cell and heading the agent can stand on, truth the cell;
+* panda-gym reach tasks: the target held at the middle of its range, start states a lattice of
+  hand positions (`start_grid` per axis, at most 4) reached by inverse kinematics, truth the hand
+  position;
+* anything else: no start states and no truth; the world says so, and is learned, not embedded.
 
 Environment keyword arguments are `--param k=v` pairs, typed by the environment's constructor
 defaults (bool/int/float/str/tuple) or, without a default, read as the most specific of
@@ -23,6 +36,7 @@ bool/int/float/none/str; a key the constructor does not take is refused with the
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import itertools
 import logging
@@ -36,7 +50,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
+from sensorimotor.protocol.messages import ActionSpace, GoalRule, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import ParamError, _scalar, option, parse, suggest, table_text, unknown_name
 from sensorimotor.worlds.base import StepResult, World
 from sensorimotor.worlds.registry import GYM_PREFIX
@@ -56,6 +70,15 @@ class GymWorldParams:
     )
     max_episode_steps: int = option(0, "episode step limit (0: the environment's own, else 1000)", min=0)
     program: str = option("generic", "the program the world asks the agent for")
+    goal: str = option(
+        "auto", "how the goal is recognised (auto: by family, see the module docstring)", choices=("auto", *GoalRule)
+    )
+    observe: str = option(
+        "state",
+        "what the agent sees: the environment's observation, or its rendered frames",
+        choices=("state", "pixels"),
+    )
+    pixels: int = option(64, "observe=pixels: frame side in pixels (grey)", min=8, max=512)
 
 
 @dataclass(frozen=True)
@@ -71,8 +94,19 @@ class StateGrid:
 # keyed by the unwrapped environment's class name; the ranges stay clear of terminal states
 STATE_GRIDS: dict[str, StateGrid] = {
     "MountainCarEnv": StateGrid(("position", "velocity"), ((-1.2, 0.45, True), (-0.07, 0.07, True))),
+    "Continuous_MountainCarEnv": StateGrid(("position", "velocity"), ((-1.2, 0.45, True), (-0.07, 0.07, True))),
     "CartPoleEnv": StateGrid(("x", "theta"), ((-2.0, 2.0, True), 0.0, (-0.18, 0.18, True), 0.0)),
     "AcrobotEnv": StateGrid(("theta1", "theta2"), ((-np.pi, np.pi, False), (-np.pi, np.pi, False), 0.0, 0.0)),
+}
+
+# packages that register ids when imported, tried in turn for an id Gymnasium does not know
+FAMILY_PACKAGES = {"MiniGrid-": "minigrid", "BabyAI-": "minigrid", "Panda": "panda_gym"}
+
+# goal rules of environments whose terminations are failures, or that have no goal state
+GOALS: dict[str, GoalRule] = {
+    "FrozenLakeEnv": GoalRule.REWARD,
+    "CartPoleEnv": GoalRule.NONE,
+    "PendulumEnv": GoalRule.NONE,
 }
 
 # gym.make's own keyword arguments that a world must not pass through
@@ -80,8 +114,29 @@ _RESERVED = {"render_mode", "max_episode_steps", "disable_env_checker", "autores
 
 
 def env_id_of(name: str) -> str:
-    """``gym:FrozenLake-v1`` -> ``FrozenLake-v1``."""
-    return name[len(GYM_PREFIX) :] if name.startswith(GYM_PREFIX) else name
+    """``gym:FrozenLake-v1`` -> ``FrozenLake-v1``; ``gym:panda_gym:PandaReach-v3`` -> ``PandaReach-v3``
+    after importing ``panda_gym`` (which registers it)."""
+    env_id = name[len(GYM_PREFIX) :] if name.startswith(GYM_PREFIX) else name
+    module, sep, rest = env_id.partition(":")
+    if sep and rest:
+        try:
+            importlib.import_module(module)
+        except ImportError as e:
+            raise ParamError(f"gym:{env_id}: cannot import {module!r}, which should register {rest!r}: {e}") from None
+        return rest
+    return env_id
+
+
+def _import_family(env_id: str) -> None:
+    """Import the package that registers `env_id` when Gymnasium does not know it yet."""
+    if env_id in gym.envs.registry:
+        return
+    for prefix, module in FAMILY_PACKAGES.items():
+        if env_id.startswith(prefix):
+            try:
+                importlib.import_module(module)
+            except ImportError:
+                pass
 
 
 def default_world_id(env_id: str) -> str:
@@ -91,6 +146,7 @@ def default_world_id(env_id: str) -> str:
 
 def env_spec(env_id: str) -> gym.envs.registration.EnvSpec:
     """The registered spec of `env_id` (ParamError naming close ids when there is none)."""
+    _import_family(env_id)
     try:
         return gym.spec(env_id)
     except gym.error.Error as e:
@@ -182,15 +238,94 @@ def split_params(env_id: str, values: Mapping[str, Any] | None) -> tuple[GymWorl
 
 
 def _box_range(box: spaces.Box, sample: Callable[[], np.ndarray]) -> tuple[float, float]:
-    """One (low, high) for the whole Box: its bounds when finite and moderate, else the range seen
-    over random steps, widened by half its span."""
+    """One (low, high) for the whole Box: its bounds when finite and not far wider than the range
+    seen over random steps, else that range widened by half its span."""
     lo, hi = np.asarray(box.low, float), np.asarray(box.high, float)
-    if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and max(np.abs(lo).max(), np.abs(hi).max()) <= 1e6:
-        return float(lo.min()), float(hi.max())
     seen = np.stack([sample() for _ in range(500)])
     a, b = float(seen.min()), float(seen.max())
     pad = 0.5 * max(b - a, 1e-6)
+    finite = np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and max(np.abs(lo).max(), np.abs(hi).max()) <= 1e6
+    if finite and float(hi.max() - lo.min()) <= 4 * (b - a + 2 * pad):
+        return float(lo.min()), float(hi.max())
+    # bounds far wider than anything the environment does (panda-gym's +-10 m around a 30 cm
+    # workspace) would leave a learner that scales by them almost blind
     return a - pad, b + pad
+
+
+class EmbeddableEnv(gym.Wrapper):
+    """The hook that makes any environment embeddable, as a wrapper: its start states, how to reset
+    to one, and their truth (and, optionally, how its goal is recognised).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        The environment.
+    starts : sequence
+        The start states, as whatever `reset_to` takes.
+    reset_to : callable
+        ``reset_to(env, start) -> observation``: after ``env.reset()``, put the environment into
+        `start` and return its observation.
+    truth : array-like
+        ``[len(starts), d]`` true coordinates of the start states.
+    goal : str or None, default=None
+        A `GoalRule` token, when the family default does not fit.
+
+    An environment can offer the same by itself, with methods ``sme_start_states()``,
+    ``sme_reset_to(start)``, ``sme_truth()`` and an attribute ``sme_goal``, on any wrapper layer.
+
+    Examples
+    --------
+    ::
+
+        env = EmbeddableEnv(MyEnv(), starts=cells, reset_to=lambda e, c: e.unwrapped.place(c), truth=cells)
+        gymnasium.register("my/Env-v0", entry_point=lambda **kw: EmbeddableEnv(MyEnv(**kw), ...))
+        # sme world gym:my_package:my/Env-v0
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        starts: Any,
+        reset_to: Callable[[gym.Env, Any], Any],
+        truth: Any,
+        goal: str | None = None,
+    ) -> None:
+        super().__init__(env)
+        self._starts, self._reset_to = list(starts), reset_to
+        self._truth = np.asarray(truth, dtype=np.float64)
+        if self._truth.ndim != 2 or self._truth.shape[0] != len(self._starts):
+            raise ValueError(f"truth must be [len(starts), d]; got {self._truth.shape} for {len(self._starts)} starts")
+        if goal is not None:
+            self.sme_goal = GoalRule(goal)
+
+    def sme_start_states(self) -> list[Any]:
+        return list(self._starts)
+
+    def sme_reset_to(self, start: Any) -> Any:
+        return self._reset_to(self.env, start)
+
+    def sme_truth(self) -> np.ndarray:
+        return self._truth
+
+
+def _layers(env: gym.Env) -> list[Any]:
+    """The wrapper layers of `env`, outermost first, down to the unwrapped environment."""
+    out: list[Any] = []
+    e: Any = env
+    while e is not None and e not in out:
+        out.append(e)
+        e = getattr(e, "env", None) if isinstance(e, gym.Wrapper) else None
+    return out
+
+
+def _hooked(env: gym.Env, name: str) -> Any:
+    """Attribute `name` of the first wrapper layer (or the unwrapped environment) that has it."""
+    for layer in _layers(env):
+        try:
+            return getattr(layer, name)
+        except AttributeError:
+            continue
+    return None
 
 
 class GymWorld(World):
@@ -212,8 +347,9 @@ class GymWorld(World):
     Raises
     ------
     ParamError
-        For an unknown environment, an unknown keyword argument, or an action space that is not
-        Discrete (a world of this kind serves discrete actions only).
+        For an unknown environment, an unknown keyword argument, or an action or observation
+        space that cannot be served (a Box action space of more than 4 dimensions is served; the
+        generic program then refuses it).
 
     Examples
     --------
@@ -241,41 +377,113 @@ class GymWorld(World):
         spec = env_spec(env_id)
         limit = prm.max_episode_steps or spec.max_episode_steps or 1000
         self.max_episode_steps = int(limit)
+        make_kw = dict(self.env_kwargs)
+        if prm.observe == "pixels":
+            make_kw["render_mode"] = "rgb_array"
+            if env_id.startswith("Panda"):  # panda-gym renders at the size asked (720x480 by default)
+                make_kw.setdefault("render_width", prm.pixels)
+                make_kw.setdefault("render_height", prm.pixels)
         try:
-            self.env = gym.make(env_id, max_episode_steps=self.max_episode_steps, **self.env_kwargs)
+            self.env = gym.make(env_id, max_episode_steps=self.max_episode_steps, **make_kw)
         except TypeError as e:  # a keyword the constructor refused after all
             raise ParamError(f"gym:{env_id}: {e}") from None
         except gym.error.Error as e:  # e.g. DependencyNotInstalled (Box2D, MuJoCo, ALE...)
             raise ParamError(f"gym:{env_id} cannot be made here: {e}") from None
         self.kind = GYM_PREFIX + env_id
+        self.u: Any = self.env.unwrapped
         act = self.env.action_space
-        if not isinstance(act, spaces.Discrete):
+        if isinstance(act, spaces.Discrete):
+            self._a0, self._na = int(act.start), int(act.n)
+            self._box: spaces.Box | None = None
+        elif (
+            isinstance(act, spaces.Box)
+            and len(act.shape) == 1
+            and np.all(np.isfinite(act.low))
+            and np.all(np.isfinite(act.high))
+        ):
+            self._a0, self._na, self._box = 0, 0, act
+        else:
             self.env.close()
             raise ParamError(
-                f"gym:{env_id} has a {type(act).__name__} action space ({act}); `sme world gym:` serves "
-                "Discrete actions only (wrap the environment to discretise its actions)"
+                f"gym:{env_id} has a {type(act).__name__} action space ({act}); `sme world gym:` serves Discrete "
+                "actions and bounded one-dimensional Box actions (wrap the environment to change its actions)"
             )
-        self._a0, self._na = int(act.start), int(act.n)
         self._first_reset = True
-        self._obs_fn, self._sensor = self._observation_sensor()
-        self.u: Any = self.env.unwrapped
         self._starts: list[Any] = []
         self._truth: np.ndarray | None = None
         self._raw: np.ndarray | None = None
         self._set_start: Callable[[Any], Any] | None = None
+        self._family = ""
         self.how = self._declare_starts()
+        self._obs_fn, self._sensors = self._observation_sensors()
+        self.goal = self._goal_rule()
         if not self._starts:
             log.warning("gym:%s: %s: no start states, no truth (learned, not embedded)", env_id, self.how)
         self.pos: Any = None
 
+    # goal --------------------------------------------------------------------------------------
+    def _goal_rule(self) -> GoalRule:
+        if self.params.goal != "auto":
+            return GoalRule(self.params.goal)
+        hooked = _hooked(self.env, "sme_goal")
+        if hooked is not None:
+            return GoalRule(hooked)
+        if self._family == "panda" or "is_success" in self._reset_info:
+            return GoalRule.SUCCESS
+        if self._family == "minigrid":
+            return GoalRule.REWARD
+        return GOALS.get(type(self.u).__name__, GoalRule.TERMINATED)
+
     # observations ------------------------------------------------------------------------------
-    def _observation_sensor(self) -> tuple[Callable[[Any], np.ndarray], SensorSpec]:
+    def _observation_sensors(self) -> tuple[Callable[[Any], dict[str, np.ndarray]], tuple[SensorSpec, ...]]:
+        if self.params.observe == "pixels":
+            n = self.params.pixels
+
+            def frame(_: Any) -> dict[str, np.ndarray]:
+                return {"pixels": _grey(self.env.render(), n)}
+
+            return frame, (SensorSpec("pixels", "uint8", (n, n), 0.0, 255.0, f"{self.env_id} rendered frame, grey"),)
         space = self.env.observation_space
+        if self._family == "panda" and isinstance(space, spaces.Dict):
+            # the target is held at one place and `achieved_goal` repeats the hand position: the arm's
+            # own state, as two sensors (position and velocity have their own ranges)
+            obs_box: Any = space["observation"]
+            sensors = []
+            for name, part in (("position", slice(0, 3)), ("velocity", slice(3, 6))):
+                box = spaces.Box(obs_box.low[part], obs_box.high[part], dtype=np.float32)
+                conv_part = lambda o, part=part: np.asarray(o[part], dtype=np.float32)  # noqa: E731
+                low, high = _box_range(box, self._random_observations(conv_part, "observation"))
+                sensors.append(SensorSpec(name, "float32", (3,), low, high, f"{self.env_id} hand {name}"))
+            return (
+                lambda o: {
+                    "position": np.asarray(o["observation"][:3], np.float32),
+                    "velocity": np.asarray(o["observation"][3:6], np.float32),
+                },
+                tuple(sensors),
+            )
+        pick = lambda o: o  # noqa: E731
+        if isinstance(space, spaces.Dict):
+            convs, sensors = [], []
+            for key, sub in space.spaces.items():
+                try:
+                    conv, sensor = self._sensor_of(sub, str(key))
+                except ParamError as e:
+                    log.warning("gym:%s: observation key %r left out: %s", self.env_id, key, e)
+                    continue
+                convs.append((key, conv))
+                sensors.append(sensor)
+            if not sensors:
+                raise ParamError(f"gym:{self.env_id}: no part of the observation space {space} can be served")
+            return (lambda o: {s.name: c(o[k]) for (k, c), s in zip(convs, sensors, strict=True)}), tuple(sensors)
+        conv, sensor = self._sensor_of(space, SENSOR)
+        return (lambda o: {SENSOR: conv(pick(o))}), (sensor,)
+
+    def _sensor_of(self, space: spaces.Space, name: str) -> tuple[Callable[[Any], np.ndarray], SensorSpec]:
         if isinstance(space, spaces.Discrete):
             lo, n = int(space.start), int(space.n)
             return (
                 lambda o: np.array([int(o)], dtype=np.int32),
-                SensorSpec(SENSOR, "int32", (1,), lo, lo + n - 1, f"{self.env_id} state id"),
+                SensorSpec(name, "int32", (1,), lo, lo + n - 1, f"{self.env_id} {name} (state id)"),
             )
         conv: Callable[[Any], np.ndarray]
         if isinstance(space, spaces.Box):
@@ -287,41 +495,129 @@ class GymWorld(World):
                 conv = lambda o: np.asarray(o, dtype=np.float32)  # noqa: E731
                 dtype = "float32"
         else:
-            flat = spaces.flatten_space(space)
+            try:
+                flat = spaces.flatten_space(space)
+            except NotImplementedError:
+                raise ParamError(f"{type(space).__name__} cannot be flattened to numbers") from None
             if not isinstance(flat, spaces.Box):
-                raise ParamError(f"gym:{self.env_id}: observation space {space} cannot be flattened to a vector")
+                raise ParamError(f"observation space {space} cannot be flattened to a vector")
             box = flat
             conv = lambda o: np.asarray(spaces.flatten(space, o), dtype=np.float32)  # noqa: E731
             dtype = "float32"
+        if dtype == "uint8":
+            low, high = 0.0, 255.0
+            if self._family == "minigrid" and name == "image":
+                low, high = 0.0, 10.0  # object, colour and state indices: the largest is 10 (the object table)
+        else:
+            low, high = _box_range(box, self._random_observations(conv, name))
+        return conv, SensorSpec(name, dtype, tuple(int(d) for d in box.shape), low, high, f"{self.env_id} {name}")
 
-        low, high = (0.0, 255.0) if dtype == "uint8" else _box_range(box, self._random_observations(conv))
-        return conv, SensorSpec(
-            SENSOR, dtype, tuple(int(d) for d in box.shape), low, high, f"{self.env_id} observation"
-        )
-
-    def _random_observations(self, conv: Callable[[Any], np.ndarray]) -> Callable[[], np.ndarray]:
+    def _random_observations(self, conv: Callable[[Any], np.ndarray], key: str) -> Callable[[], np.ndarray]:
         """Observations of random steps (seeded by the world), for estimating an unbounded range."""
         rng = np.random.default_rng([self.seed, 7])
-        state = {"obs": conv(self.env.reset(seed=int(rng.integers(2**31)))[0])}
+        part = (
+            (lambda o: o[key])
+            if isinstance(self.env.observation_space, spaces.Dict) and key != SENSOR
+            else ((lambda o: o["observation"]) if self._family == "panda" else (lambda o: o))
+        )
+        state = {"obs": conv(part(self.env.reset(seed=int(rng.integers(2**31)))[0]))}
 
         def nxt() -> np.ndarray:
-            o, _, term, trunc, _ = self.env.step(self._a0 + int(rng.integers(self._na)))
+            o, _, term, trunc, _ = self.env.step(self._random_action(rng))
             out = state["obs"]
-            state["obs"] = conv(self.env.reset()[0] if term or trunc else o)
+            state["obs"] = conv(part(self.env.reset()[0] if term or trunc else o))
             return out
 
         return nxt
 
+    def _random_action(self, rng: np.random.Generator) -> Any:
+        if self._box is not None:
+            return rng.uniform(self._box.low, self._box.high).astype(self._box.dtype)
+        return self._a0 + int(rng.integers(self._na))
+
     # start states ------------------------------------------------------------------------------
     def _declare_starts(self) -> str:
         """Fill the start states, their truth and the setter; return how (for the spec and logs)."""
-        u: Any = self.env.unwrapped  # the environment's own attributes (P, s, state) are not typed
+        u: Any = self.u  # the environment's own attributes (P, s, state) are not typed
+        _, self._reset_info = self.env.reset(seed=self.seed)
+        starts = _hooked(self.env, "sme_start_states")
+        if starts is not None and _hooked(self.env, "sme_reset_to") is not None:
+            return self._hook_starts()
+        if type(u).__module__.startswith("minigrid"):
+            self._family = "minigrid"
+            return self._minigrid_starts()
+        if type(u).__module__.startswith("panda_gym") and hasattr(u, "robot") and hasattr(u, "task"):
+            self._family = "panda"
+            return self._panda_starts()
         grid = STATE_GRIDS.get(type(u).__name__)
         if grid is not None and hasattr(u, "state"):
             return self._grid_starts(grid)
         if hasattr(u, "P") and isinstance(self.env.observation_space, spaces.Discrete):
             return self._table_starts()
-        return "its state cannot be set"
+        return "its state cannot be set (add the hook: see EmbeddableEnv)"
+
+    def _hook_starts(self) -> str:
+        self._family = "hook"
+        self._starts = list(_hooked(self.env, "sme_start_states")())
+        truth = _hooked(self.env, "sme_truth")
+        if truth is not None:
+            t = np.asarray(truth(), dtype=np.float64)
+            if t.ndim != 2 or t.shape[0] != len(self._starts):
+                raise ParamError(f"gym:{self.env_id}: sme_truth() gives {t.shape} for {len(self._starts)} start states")
+            self._truth = t
+        reset_to = _hooked(self.env, "sme_reset_to")
+        self._set_start = lambda start: reset_to(start)
+        return f"{len(self._starts)} start states from the environment's own hook"
+
+    def _minigrid_starts(self) -> str:
+        u: Any = self.u
+        cells = [
+            (x, y)
+            for y in range(1, u.height - 1)
+            for x in range(1, u.width - 1)
+            if u.grid.get(x, y) is None
+            or u.grid.get(x, y).can_overlap()
+            and u.grid.get(x, y).type != "goal"
+            and u.grid.get(x, y).type != "lava"
+        ]
+        self._starts = [(c, d) for c in cells for d in range(4)]
+        self._truth = np.array([c for c, _ in self._starts], dtype=np.float64)
+
+        def set_state(start: Any) -> Any:
+            (x, y), d = start
+            u.agent_pos, u.agent_dir = (int(x), int(y)), int(d)
+            return u.gen_obs()
+
+        self._set_start = set_state
+        return f"{len(self._starts)} starts: {len(cells)} free cells x 4 headings, truth the cell"
+
+    def _panda_starts(self) -> str:
+        u: Any = self.u
+        lo, hi = np.asarray(u.task.goal_range_low, float), np.asarray(u.task.goal_range_high, float)
+        self._goal = (lo + hi) / 2
+        n = min(self.params.start_grid, 4)
+        axes = [np.linspace(a, b, n) for a, b in zip(lo, hi, strict=True)]
+        points = [np.array(p) for p in itertools.product(*axes)]
+        down = np.array([1.0, 0.0, 0.0, 0.0])  # the hand orientation panda-gym's hand control keeps
+        angles = []
+        truth = []
+        for p in points:
+            u.reset(seed=self.seed)
+            q = u.robot.inverse_kinematics(link=u.robot.ee_link, position=p, orientation=down)
+            u.robot.set_joint_angles(q)
+            angles.append(np.asarray(q, dtype=np.float64))
+            truth.append(np.asarray(u.robot.get_ee_position(), dtype=np.float64))
+        self._starts = angles
+        self._truth = np.array(truth)
+
+        def set_state(q: np.ndarray) -> Any:
+            u.robot.set_joint_angles(q)
+            u.task.goal = self._goal.copy()
+            u.sim.set_base_pose("target", self._goal, np.array([0.0, 0.0, 0.0, 1.0]))
+            return u._get_obs()
+
+        self._set_start = set_state
+        return f"{len(points)} hand positions on a {n}x{n}x{n} lattice (inverse kinematics), target held at {np.round(self._goal, 3).tolist()}"
 
     def _grid_starts(self, grid: StateGrid) -> str:
         n = self.params.start_grid
@@ -387,21 +683,29 @@ class GymWorld(World):
 
     # the World interface ---------------------------------------------------------------------
     def spec(self) -> WorldSpec:
-        """One sensor ``observation``; the environment's discrete actions; its start states."""
+        """The sensors; the environment's actions (discrete or a box); its start states and goal rule."""
         rr = getattr(self.u, "reward_range", None) or (-np.inf, np.inf)
-        params = {"env_id": self.env_id, "start_states": self.how}
+        params = {"env_id": self.env_id, "start_states": self.how, "max_episode_steps": str(self.max_episode_steps)}
+        if self._truth is not None:
+            params["truth_dims"] = str(self._truth.shape[1])
         params.update({k: str(v) for k, v in self.env_kwargs.items()})
         params.update({f.name: str(getattr(self.params, f.name)).lower() for f in fields(GymWorldParams)})
+        if self._box is not None:
+            b = self._box
+            action_space = ActionSpace(low=tuple(float(v) for v in b.low), high=tuple(float(v) for v in b.high))
+        else:
+            action_space = ActionSpace(n=self._na)
         return WorldSpec(
             world_id=self.world_id,
             kind=self.kind,
-            sensors=(self._sensor,),
-            action_space=ActionSpace(n=self._na),
+            sensors=self._sensors,
+            action_space=action_space,
             reward_min=float(rr[0]),
             reward_max=float(rr[1]),
             program=self.params.program,
             n_starts=len(self._starts),
             params=params,
+            goal=self.goal,
         )
 
     def reset(self, seed: int | None = None, start: int | None = None) -> StepResult:
@@ -419,19 +723,32 @@ class GymWorld(World):
             obs = self._set_start(self._starts[k])
         elif start is not None and start >= 0:
             raise ValueError(f"gym:{self.env_id} declares no start states ({self.how})")
-        return StepResult({SENSOR: self._obs_fn(obs)})
+        return StepResult(self._obs_fn(obs))
 
     def step(self, action: np.ndarray) -> StepResult:
-        """One environment step; ``done`` when it terminates or is truncated."""
-        a = int(np.asarray(action).reshape(-1)[0])
-        if not 0 <= a < self._na:
-            raise ValueError(f"action {a} out of range 0..{self._na - 1}")
-        obs, reward, term, trunc, info = self.env.step(self._a0 + a)
+        """One environment step; ``done`` when it terminates or is truncated (``truncated`` says
+        which), ``success`` from the environment's ``is_success``."""
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if self._box is not None:
+            if a.size != self._box.shape[0]:
+                raise ValueError(f"action has {a.size} values; the box has {self._box.shape[0]}")
+            act: Any = np.clip(a, self._box.low, self._box.high).astype(self._box.dtype)
+        else:
+            i = int(a[0])
+            if not 0 <= i < self._na:
+                raise ValueError(f"action {i} out of range 0..{self._na - 1}")
+            act = self._a0 + i
+        obs, reward, term, trunc, info = self.env.step(act)
+        if self._family == "panda":
+            self.u.task.goal = self._goal.copy()  # held: panda-gym never moves it within an episode, but be sure
+        success = bool(np.asarray(info.get("is_success", False)).any()) if isinstance(info, dict) else False
         return StepResult(
-            {SENSOR: self._obs_fn(obs)},
+            self._obs_fn(obs),
             float(reward),
             bool(term or trunc),
             {"terminated": bool(term), "truncated": bool(trunc)},
+            truncated=bool(trunc and not term),
+            success=success,
         )
 
     def truth(self) -> Truth | None:
@@ -445,6 +762,19 @@ class GymWorld(World):
 
     def close(self) -> None:
         self.env.close()
+
+
+def _grey(frame: Any, n: int) -> np.ndarray:
+    """An RGB(A) frame as an n x n grey uint8 image (area-averaged, no extra dependency)."""
+    a = np.asarray(frame, dtype=np.float64)
+    if a.ndim == 3:
+        a = a[..., :3] @ np.array([0.299, 0.587, 0.114])
+    h, w = a.shape
+    ys = (np.arange(n + 1) * h) // n
+    xs = (np.arange(n + 1) * w) // n
+    out = np.add.reduceat(np.add.reduceat(a, ys[:-1], axis=0), xs[:-1], axis=1)
+    counts = np.outer(np.diff(ys), np.diff(xs))
+    return np.clip(out / np.maximum(counts, 1), 0, 255).astype(np.uint8)
 
 
 def gym_params_text(name: str) -> str:
@@ -469,4 +799,4 @@ def make_gym_world(name: str, world_id: str | None, seed: int, params: Mapping[s
     return GymWorld(env_id, world_id, seed, prm, kwargs)
 
 
-__all__ = ["GymWorld", "GymWorldParams", "STATE_GRIDS", "make_gym_world", "split_params"]
+__all__ = ["EmbeddableEnv", "GymWorld", "GymWorldParams", "STATE_GRIDS", "make_gym_world", "split_params"]

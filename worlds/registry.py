@@ -2,12 +2,15 @@
 `sme perturb --list` and the README can show each kind's declared parameters and perturbations.
 
 World modules are imported lazily (PyBullet loads only for the worlds that need it). A name
-``gym:ENV_ID`` is any Gymnasium environment with discrete actions (`worlds.gym_world`): its
-parameters are the world's own (`GymWorldParams`) and the environment's keyword arguments."""
+``gym:ENV_ID`` is any Gymnasium environment (`worlds.gym_world`): its parameters are the world's
+own (`GymWorldParams`) and the environment's keyword arguments. A World subclass from another
+package is named ``package.module:Class``, or by the name its package declares in the
+``sensorimotor.worlds`` entry-point group (``[project.entry-points."sensorimotor.worlds"]``)."""
 
 from __future__ import annotations
 
 import importlib
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -34,14 +37,20 @@ class WorldKind:
     cls: str
     params: str
     summary: str
+    absolute: bool = False  # `module` is a full import path (a world from another package)
+
+    def _module(self) -> Any:
+        return importlib.import_module(self.module if self.absolute else f"sensorimotor.worlds.{self.module}")
 
     def world_class(self) -> WorldClass:
         """Import the world's module and return its World class."""
-        return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.cls)
+        return getattr(self._module(), self.cls)
 
     def params_type(self) -> type[Any]:
         """Import the world's module and return its parameter dataclass."""
-        return getattr(importlib.import_module(f"sensorimotor.worlds.{self.module}"), self.params)
+        if self.absolute:
+            return self.world_class().Params
+        return getattr(self._module(), self.params)
 
 
 WORLDS: dict[str, WorldKind] = {
@@ -74,7 +83,35 @@ WORLDS: dict[str, WorldKind] = {
 
 
 GYM_PREFIX = "gym:"
-GYM_KIND = WorldKind("gym_world", "GymWorld", "GymWorldParams", "any Gymnasium environment with discrete actions")
+#: the entry-point group through which installed packages offer World subclasses by name
+ENTRY_POINT_GROUP = "sensorimotor.worlds"
+
+
+def _outside_kind(name: str) -> WorldKind | None:
+    """A World subclass from outside this project: ``package.module:Class`` (by path), or a name
+    that an installed package declares in the ``sensorimotor.worlds`` entry-point group."""
+    target = name
+    if ":" not in name:
+        from importlib.metadata import entry_points
+
+        found = [ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name == name]
+        if not found:
+            return None
+        target = found[0].value
+    module, _, cls = target.partition(":")
+    if not module or not cls:
+        raise ParamError(f"world {name!r}: expected package.module:Class")
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as e:
+        raise ParamError(f"world {name!r}: cannot import {module!r}: {e}") from None
+    klass = getattr(mod, cls, None)
+    if not (isinstance(klass, type) and issubclass(klass, World)):
+        raise ParamError(f"world {name!r}: {module}.{cls} is not a World subclass")
+    return WorldKind(module, cls, klass.Params.__name__, (klass.__doc__ or cls).strip().splitlines()[0], absolute=True)
+
+
+GYM_KIND = WorldKind("gym_world", "GymWorld", "GymWorldParams", "any Gymnasium environment")
 
 
 def world_kind(name: str) -> WorldKind:
@@ -82,10 +119,12 @@ def world_kind(name: str) -> WorldKind:
     the known kinds otherwise."""
     if name.startswith(GYM_PREFIX):
         return GYM_KIND
-    try:
+    if name in WORLDS:
         return WORLDS[name]
-    except KeyError:
-        raise ParamError(unknown_name("world", name, sorted(WORLDS))) from None
+    outside = _outside_kind(name)
+    if outside is not None:
+        return outside
+    raise ParamError(unknown_name("world", name, sorted(WORLDS))) from None
 
 
 def world_params(name: str) -> type[Any]:
@@ -138,4 +177,11 @@ def make_world(name: str, world_id: str | None = None, seed: int = 0, params: Ma
         return make_gym_world(name, world_id, seed, params)
     kind = world_kind(name)
     prm = parse(kind.params_type(), params or {}, name=name)
+    if world_id is None and kind.absolute:  # a path is no bus id: the class's kind (or name) is
+        klass: Any = kind.world_class()
+        world_id = re.sub(
+            r"[^A-Za-z0-9_.-]",
+            "-",
+            getattr(klass, "kind", "") if getattr(klass, "kind", "world") != "world" else kind.cls.lower(),
+        )
     return kind.world_class()(world_id or name, seed, prm)

@@ -108,6 +108,7 @@ class GenericProgramParams:
         0.0, "Sarsa exploration rate (optimistic initial values explore without it)", min=0.0, max=1.0
     )
     embed_every: int = option(5000, "Sarsa: learning steps between embedding sweeps", min=1)
+    sarsa_warmup: int = option(1000, "Sarsa: random steps first, to measure each value's range for the tiles", min=0)
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     distance: str = option(
         "padded", "box actions: padded sum (Eq 3.1) or dtw between the continuous traces", choices=("padded", "dtw")
@@ -382,6 +383,11 @@ class GenericProgram(Program):
                 seed=int(self.rng.integers(2**31)),
             )
             basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
+            # per-value ranges, measured over the first `sarsa_warmup` random steps: a sensor's one
+            # declared range may span values of very different scales (position and velocity)
+            self._seen_lo = np.full(d, np.inf)
+            self._seen_hi = np.full(d, -np.inf)
+            self._warm = 0
         else:
             self.n_states = 0
             self.dim = min(d, prm.projection)
@@ -779,8 +785,24 @@ class GenericProgram(Program):
         self._prev_x, self._prev_key, self._prev = x, key, (0, a2)
         return Decision(tuple(float(v) for v in self.actions[a2]))
 
+    def _warmup(self, obs: Observation) -> Decision:
+        """A random step that measures the range of every value; at its end the tiles are laid
+        over those ranges (widened by a tenth of their span on each side)."""
+        x = self._flat(obs)
+        self._seen_lo, self._seen_hi = np.minimum(self._seen_lo, x), np.maximum(self._seen_hi, x)
+        self._warm += 1
+        if self._warm >= self.params.sarsa_warmup:
+            lo, hi = self._seen_lo, self._seen_hi
+            span = np.where(hi > lo, hi - lo, 1.0)
+            self._lo, self._span = lo - 0.1 * span, 1.2 * span
+        if obs.done:
+            return Decision(reset=True, start=-1)
+        return Decision(tuple(float(v) for v in self.actions[int(self.rng.integers(self.n_actions))]))
+
     def act(self, obs: Observation) -> Decision:
         assert self.background is not None
+        if self.sarsa is not None and self._warm < self.params.sarsa_warmup:
+            return self._warmup(obs)
         if self.phase == "explore" and self.sarsa is not None:
             for name, result in self.background.tick():
                 if name == "embed":
@@ -819,6 +841,23 @@ class GenericProgram(Program):
             return Decision(tuple(float(v) for v in self.actions[a]))
         return self._sweep_act(obs)
 
+    def _learn_in_sweep(self, obs: Observation, a: int | None) -> None:
+        """Sarsa learns from a sweep of its newest policy too: with optimistic values and no
+        exploration noise the greedy actions are its own on-policy actions (the accepted policy's
+        check sweeps are not)."""
+        assert self.sarsa is not None
+        x = self._vector(obs)
+        if obs.t > 0 and self._prev_x is not None and self._prev is not None:
+            pa = self._prev[1]
+            if self._terminal(obs):
+                r = 0.0 if reached(self.goal, obs) else -1.0 / (1.0 - self.sarsa.gamma)
+                self.sarsa.learn_one(self._prev_x, pa, r, x, None)
+            else:
+                self.sarsa.learn_one(self._prev_x, pa, -1.0, x, a if a is not None else self.sarsa.greedy(x))
+        if obs.t == 0:
+            self.sarsa.begin_episode()
+        self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
+
     def _sweep_act(self, obs: Observation) -> Decision:
         n_before = len(self._sweep.traces)
         dec = self._sweep.step(obs, self._choose, self._cycle)
@@ -834,6 +873,8 @@ class GenericProgram(Program):
             else:
                 self._unfed.append(score)
             self._diverged = False
+        if self.sarsa is not None and not self._checking and self.params.epsilon == 0.0:
+            self._learn_in_sweep(obs, None if dec.reset else int(dec.values[0]))
         if not dec.reset:
             dec = Decision(tuple(float(v) for v in self.actions[int(dec.values[0])]))
         if self._sweep.finished:
@@ -904,6 +945,8 @@ class GenericProgram(Program):
         }
         if self.sarsa is not None:
             out["sarsa"] = self.sarsa.state()
+            out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
+            out.update(lo=self._lo.copy(), span=self._span.copy())
         elif not self.tabular:
             out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=_basis_state(self._rbf))
         return out
@@ -944,6 +987,11 @@ class GenericProgram(Program):
         self._unfed = [float(v) for v in state.get("unfed", [])]
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
+            self._warm = int(state["warm"])
+            self._seen_lo = np.asarray(state["seen_lo"], dtype=np.float64)
+            self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
+            self._lo = np.asarray(state["lo"], dtype=np.float64)
+            self._span = np.asarray(state["span"], dtype=np.float64)
         elif not self.tabular:
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)

@@ -1,0 +1,201 @@
+"""Worlds nobody here wrote (issue 21): success as the world declares it, Box actions, Dict and
+pixel observations, MiniGrid and panda-gym families, the hook for a user's own environment, World
+subclasses by path and by entry point, and `sme bench zoo`."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import textwrap
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from sensorimotor.agent.programs.goal import failed, reached
+from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.protocol import codec
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import ActionSpace, GoalRule, Observation, SensorSpec, WorldSpec
+from sensorimotor.protocol.params import ParamError
+from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.worlds.gym_world import EmbeddableEnv
+from sensorimotor.worlds.registry import make_world
+
+
+def _obs(**kw) -> Observation:
+    return Observation("w", 0, 1, 1, {"x": np.zeros(1, np.float32)}, **kw)
+
+
+def test_goal_rules_tell_goals_from_failures_and_time_limits():
+    assert reached("reward", _obs(reward=1.0)) and not reached("reward", _obs(reward=-1.0, done=True))
+    assert reached("terminated", _obs(reward=-1.0, done=True))
+    assert not reached("terminated", _obs(done=True, truncated=True)) and not failed(
+        "terminated", _obs(done=True, truncated=True)
+    )
+    assert reached("success", _obs(success=True)) and failed("success", _obs(done=True))
+    assert failed("reward", _obs(done=True)) and not reached("none", _obs(reward=1.0, done=True))
+
+
+def test_goal_rule_and_flags_travel_on_the_wire_and_unknown_rules_are_refused():
+    spec = WorldSpec("w", "k", (SensorSpec("x", "float32", (1,)),), ActionSpace(n=2), goal=GoalRule.SUCCESS)
+    assert codec.decode(WorldSpec, codec.encode(spec)).goal == GoalRule.SUCCESS
+    assert codec.decode(WorldSpec, codec.encode(WorldSpec("w", "k", spec.sensors, spec.action_space))).goal == "reward"
+    obs = _obs(done=True, truncated=True, success=True)
+    back = codec.decode(Observation, codec.encode(obs))
+    assert back.truncated and back.success
+    from sensorimotor.protocol import sme_v1_pb2 as pb
+
+    p = pb.WorldSpec.FromString(codec.encode(spec))
+    p.goal = "sometimes"
+    with pytest.raises(ProtocolError, match="goal"):
+        codec.decode(WorldSpec, p.SerializeToString())
+
+
+def test_cliffwalking_is_learned_with_its_terminal_goal_and_embeddings_hold():
+    with make_world("gym:CliffWalking-v1", None, 0) as w:
+        spec = w.spec()
+        assert spec.goal == "terminated" and spec.n_starts == 37
+        program = make_program(spec, 0)
+        run = run_inprocess(w, program, 15_000)
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert embs[-1].metrics["goal_reached_fraction"] == 1.0
+    assert embs[-1].procrustes_error < 0.1, [e.procrustes_error for e in embs]
+    best = min(e.procrustes_error for e in embs)
+    after = [e.procrustes_error for e in embs if e.metrics["goal_reached_fraction"] >= 0.9]
+    assert max(after) <= 1.5 * max(best, after[0]), after  # no regression once learned
+
+
+def test_box_actions_are_served_and_learned_by_sarsa_over_the_continuous_values():
+    with make_world("gym:MountainCarContinuous-v0", None, 0) as w:
+        spec = w.spec()
+        assert not spec.action_space.discrete and spec.action_space.low == (-1.0,) and spec.goal == "terminated"
+        program = make_program(spec, 0, embed_every=2000, sarsa_warmup=500, distance="dtw", max_trace=60)
+        assert program.learner == "sarsa" and "Sarsa" in program.describe()
+        run = run_inprocess(w, program, 9_000)
+    embs = run.embeddings
+    assert embs and embs[0].coordinates.shape == (81, 2)
+    assert any(e.metrics["goal_reached_fraction"] > 0 for e in embs)
+
+
+def test_dict_observations_lose_only_what_cannot_be_flattened():
+    pytest.importorskip("minigrid")
+    with make_world("gym:MiniGrid-Empty-8x8-v0", None, 0) as w:  # found without "minigrid:"
+        spec = w.spec()
+        assert [s.name for s in spec.sensors] == ["direction", "image"] and spec.goal == "reward"
+        assert spec.n_starts == 35 * 4 and w.truth().tensors["positions"].shape == (140, 2)
+        program = make_program(spec, 0)
+        assert program.learner == "tabular" and program.keyed
+
+
+def test_panda_reach_holds_its_target_and_starts_on_a_lattice_of_hand_positions():
+    pytest.importorskip("panda_gym")
+    with make_world("gym:panda_gym:PandaReach-v3", None, 0) as w:
+        spec = w.spec()
+        truth = w.truth().tensors["positions"]
+        assert spec.goal == "success" and spec.n_starts == 64 and truth.shape == (64, 3)
+        assert spec.params["truth_dims"] == "3" and [s.name for s in spec.sensors] == ["position", "velocity"]
+        r = w.reset(start=5)
+        assert np.allclose(r.tensors["position"], truth[5], atol=0.02)  # the hand is where the truth says
+        assert make_program(spec, 0).learner == "sarsa"
+
+
+def test_module_prefix_imports_the_package_and_unknown_modules_are_clear():
+    with pytest.raises(ParamError, match="cannot import 'no_such_pkg'"):
+        make_world("gym:no_such_pkg:Thing-v0")
+
+
+class Line(gym.Env):
+    """A 1-D line of 15 cells the project has never seen: observation a noisy-free one-hot, goal at the right end."""
+
+    def __init__(self) -> None:
+        self.observation_space = gym.spaces.Box(0.0, 1.0, (15,), np.float32)
+        self.action_space = gym.spaces.Discrete(2)
+        self.pos = 0
+
+    def _o(self):
+        o = np.zeros(15, np.float32)
+        o[self.pos] = 1.0
+        return o
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.pos = 0
+        return self._o(), {}
+
+    def step(self, a):
+        self.pos = int(np.clip(self.pos + (1 if int(a) == 1 else -1), 0, 14))
+        return self._o(), 0.0, self.pos == 14, False, {}
+
+
+def _place(env, cell):
+    env.unwrapped.pos = int(cell)
+    return env.unwrapped._o()
+
+
+def test_the_hook_makes_an_environment_the_project_never_saw_embeddable():
+    gym.register(
+        "zoo-test/Line-v0", entry_point=lambda: EmbeddableEnv(Line(), range(14), _place, np.arange(14.0)[:, None])
+    )
+    with make_world("gym:zoo-test/Line-v0", "line", 0) as w:
+        spec = w.spec()
+        assert spec.n_starts == 14 and spec.goal == "terminated" and "hook" in spec.params["start_states"]
+        run = run_inprocess(w, make_program(spec, 0, samples_per_iteration=300), 8_000)
+    errors = [e for e in run.errors if e is not None]
+    assert errors and errors[-1] < 0.1, errors
+    assert not run.events("drop_detected")
+
+
+def test_a_world_subclass_is_served_by_path_and_by_entry_point(tmp_path, monkeypatch):
+    pkg = tmp_path / "my_worlds"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "line.py").write_text(
+        textwrap.dedent(
+            '''
+            import numpy as np
+            from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
+            from sensorimotor.worlds.base import StepResult, World
+
+            class LineWorld(World):
+                """A line of 12 cells; reward at the right end."""
+                kind = "my-line"
+                def __init__(self, world_id="my-line", seed=0, params=None):
+                    super().__init__(world_id, seed)
+                    self.params, self.pos = params, 0
+                def spec(self):
+                    return WorldSpec(self.world_id, self.kind, (SensorSpec("cell", "int32", (1,), 0, 11),), ActionSpace(n=2), program="generic", n_starts=11)
+                def reset(self, seed=None, start=None):
+                    self.pos = self.pick_start(seed, start, 11)
+                    return StepResult({"cell": np.array([self.pos], np.int32)})
+                def step(self, action):
+                    self.pos = int(np.clip(self.pos + (1 if int(action[0]) else -1), 0, 11))
+                    return StepResult({"cell": np.array([self.pos], np.int32)}, float(self.pos == 11), self.pos == 11)
+                def truth(self):
+                    return Truth(self.world_id, "start_states", {"positions": np.arange(11.0)[:, None]})
+            '''
+        )
+    )
+    dist = tmp_path / "my_worlds-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: my-worlds\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[sensorimotor.worlds]\nmy-line = my_worlds.line:LineWorld\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.invalidate_caches()
+    for name in ("my_worlds.line:LineWorld", "my-line"):
+        with make_world(name, None, 0) as w:
+            assert w.world_id == "my-line"
+            run = run_inprocess(w, make_program(w.spec(), 0, samples_per_iteration=200), 3_000)
+        errors = [e for e in run.errors if e is not None]
+        assert errors and errors[-1] < 0.1, (name, errors)
+    with pytest.raises(ParamError, match="not a World subclass"):
+        make_world("my_worlds.line:np")
+    sys.modules.pop("my_worlds.line", None)
+
+
+def test_bench_zoo_quick_reports_every_figure(capsys):
+    from sensorimotor.tools.bench.zoo import ZOO, run_one
+
+    r = run_one(next(z for z in ZOO if z.label == "CliffWalking"), 0, 8_000)
+    assert r["goal"] == "terminated" and r["final_error"] < 0.1 and r["goal_reached_fraction"] == 1.0
+    assert r["trustworthiness"] > 0.9 and r["pca_error"] is not None and r["regressions"] == 0 and r["drops"] == 0

@@ -1,0 +1,246 @@
+"""`sme bench zoo`: the generic program on worlds nobody here wrote (Gymnasium toy text, classic
+control, MiniGrid, panda-gym), in-process and seeded. Per world and seed: final and best Procrustes
+error of the embeddings against the declared truth, trustworthiness of the final one, the fraction
+of starts whose greedy trace reached the goal, steps and seconds to the first embedding below 0.1,
+whether any version after convergence was over 1.5x worse than the best before it without a detected
+drop, drops detected in a run with no perturbation, and beside them the sensor-only peers (PCA and
+Isomap of the start observations, as ch. 6 does)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sensorimotor.agent.detectors import make_detector
+from sensorimotor.agent.embedding import procrustes_error
+from sensorimotor.agent.programs.registry import make_program
+from sensorimotor.protocol.messages import EventKind
+from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.worlds.registry import make_world
+
+
+@dataclass(frozen=True)
+class ZooWorld:
+    """One zoo entry: the world name, its parameters, program parameters and step budget."""
+
+    label: str
+    world: str
+    params: dict[str, str] = field(default_factory=dict)
+    program: dict[str, str] = field(default_factory=dict)
+    steps: int = 100_000
+    quick_steps: int = 20_000
+    needs: str = ""  # a module the world needs (skipped, and said, when missing)
+
+
+ZOO: tuple[ZooWorld, ...] = (
+    ZooWorld("FrozenLake 8x8", "gym:FrozenLake-v1", {"map_name": "8x8", "is_slippery": "false"}, {}, 30_000, 10_000),
+    ZooWorld("FrozenLake 4x4 slippery", "gym:FrozenLake-v1", {}, {}, 60_000, 20_000),
+    ZooWorld("FrozenLake 4x4 slippery, mean estimator", "gym:FrozenLake-v1", {}, {"estimator": "mean"}, 60_000, 20_000),
+    ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 30_000, 10_000),
+    ZooWorld("MiniGrid Empty 8x8", "gym:MiniGrid-Empty-8x8-v0", {}, {}, 60_000, 20_000, "minigrid"),
+    ZooWorld("MountainCar", "gym:MountainCar-v0", {}, {}, 100_000, 30_000),
+    ZooWorld("MountainCarContinuous", "gym:MountainCarContinuous-v0", {}, {}, 100_000, 30_000),
+    ZooWorld("MountainCarContinuous, DTW", "gym:MountainCarContinuous-v0", {}, {"distance": "dtw"}, 100_000, 30_000),
+    ZooWorld("PandaReach (state)", "gym:panda_gym:PandaReach-v3", {}, {}, 60_000, 15_000, "panda_gym"),
+    ZooWorld(
+        "PandaReach (pixels)", "gym:panda_gym:PandaReach-v3", {"observe": "pixels"}, {}, 60_000, 10_000, "panda_gym"
+    ),
+)
+
+
+def _trustworthiness(truth: np.ndarray, coords: np.ndarray) -> float | None:
+    try:
+        from sklearn.manifold import trustworthiness
+    except ImportError:  # the experiments extra
+        return None
+    k = max(1, min(5, (len(truth) - 1) // 2 - 1))
+    return float(trustworthiness(truth, coords, n_neighbors=k)) if len(truth) > 2 * k + 1 else None
+
+
+def sensor_peers(world: Any, dims: int) -> dict[str, float | None]:
+    """PCA and Isomap (best of a few neighbourhood sizes) of the observations at the start states."""
+    truth = world.truth()
+    if truth is None:
+        return {"pca_error": None, "isomap_error": None}
+    from sklearn.decomposition import PCA
+    from sklearn.manifold import Isomap
+
+    spec = world.spec()
+    rows = []
+    for i in range(spec.n_starts):
+        r = world.reset(start=i)
+        rows.append(np.concatenate([np.asarray(r.tensors[s.name], dtype=np.float64).reshape(-1) for s in spec.sensors]))
+    X = np.array(rows)
+    X = X + 1e-9 * np.random.default_rng(0).standard_normal(X.shape)  # identical rows would break Isomap
+    pos = np.asarray(truth.tensors["positions"], dtype=np.float64)
+    d = min(dims, X.shape[1])
+    out: dict[str, float | None] = {"pca_error": procrustes_error(pos, PCA(n_components=d).fit_transform(X))}
+    best = None
+    for k in (4, 6, 8, 12):
+        if k < X.shape[0]:
+            try:
+                e = procrustes_error(pos, Isomap(n_neighbors=k, n_components=d).fit_transform(X))
+            except ValueError:
+                continue
+            best = e if best is None else min(best, e)
+    out["isomap_error"] = best
+    return out
+
+
+def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
+    """One seeded in-process run of entry `z`."""
+    with make_world(z.world, None, seed, z.params) as w:
+        spec = w.spec()
+        program = make_program(spec, seed, **z.program)
+        detector = make_detector("cusum", **program.detector_params)
+        first: dict[str, float] = {}
+        t0 = time.perf_counter()
+
+        def seen(msg: Any) -> None:
+            e = getattr(msg, "procrustes_error", None)
+            if e is not None and e < 0.1 and "step" not in first:
+                first.update(step=float(msg.step), seconds=time.perf_counter() - t0)
+
+        run = run_inprocess(w, program, steps, detector=detector, on_output=seen)
+        seconds = time.perf_counter() - t0
+        embs = [e for e in run.embeddings if e.procrustes_error is not None]
+        peers = sensor_peers(w, program.dims if hasattr(program, "dims") else 2) if embs else {}
+        truth = w.truth()
+    errors = [float(e.procrustes_error) for e in embs if e.procrustes_error is not None]
+    drops = [e.step for e in run.events(EventKind.DROP_DETECTED)]
+    # after convergence (the first version that reached the goal from >= 90 % of starts), no version
+    # more than 1.5x worse than the best before it, unless a drop was detected before it
+    regressions = 0
+    best = None
+    converged = False
+    for e in embs:
+        converged = converged or e.metrics.get("goal_reached_fraction", 0.0) >= 0.9
+        err = float(e.procrustes_error or 0.0)
+        if converged and best is not None and err > 1.5 * best + 1e-9 and not any(d < e.step for d in drops):
+            regressions += 1
+        best = err if best is None else min(best, err)
+    trust = None
+    if embs and truth is not None:
+        pos = np.asarray(truth.tensors["positions"], dtype=np.float64)[np.asarray(embs[-1].ids)]
+        trust = _trustworthiness(pos, np.asarray(embs[-1].coordinates))
+    last = embs[-1] if embs else None
+    return {
+        "world": z.label,
+        "name": z.world,
+        "seed": seed,
+        "steps": run.steps,
+        "seconds": round(seconds, 1),
+        "learner": getattr(program, "learner", program.name),
+        "goal": str(spec.goal),
+        "n_starts": spec.n_starts,
+        "embeddings": len(errors),
+        "final_error": errors[-1] if errors else None,
+        "best_error": min(errors) if errors else None,
+        "trustworthiness": trust,
+        "goal_reached_fraction": last.metrics.get("goal_reached_fraction") if last else None,
+        "stochastic": bool(last.metrics.get("stochastic", 0.0)) if last else False,
+        "steps_to_0.1": first.get("step"),
+        "seconds_to_0.1": round(first["seconds"], 1) if "seconds" in first else None,
+        "regressions": regressions,
+        "drops": len(drops),
+        **peers,
+    }
+
+
+def _mean(rows: list[dict[str, Any]], key: str) -> float | None:
+    vals = [r[key] for r in rows if r.get(key) is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per world: means over seeds of the figures `run_one` reports."""
+    out = []
+    for label in dict.fromkeys(r["world"] for r in rows):
+        rs = [r for r in rows if r["world"] == label]
+        keys = (
+            "final_error",
+            "best_error",
+            "trustworthiness",
+            "goal_reached_fraction",
+            "steps_to_0.1",
+            "pca_error",
+            "isomap_error",
+        )
+        out.append(
+            {"world": label, "seeds": len(rs), "learner": rs[0]["learner"], "goal": rs[0]["goal"]}
+            | {k: _mean(rs, k) for k in keys}
+            | {"regressions": sum(r["regressions"] for r in rs), "drops": sum(r["drops"] for r in rs)}
+        )
+    return out
+
+
+def _fmt(v: Any) -> str:
+    return "-" if v is None else f"{v:.3f}" if isinstance(v, float) else str(v)
+
+
+def main(seeds: int = 3, quick: bool = False, only: list[str] | None = None, json_out: bool = False) -> int:
+    """Run the zoo; print one line per run and a summary table (or JSON lines)."""
+    import importlib.util
+
+    rows = []
+    for z in ZOO:
+        if only and not any(o.lower() in z.label.lower() or o == z.world for o in only):
+            continue
+        if z.needs and importlib.util.find_spec(z.needs) is None:
+            print(f"zoo: {z.label}: skipped ({z.needs} is not installed: pip install -e '.[worlds]')", file=sys.stderr)
+            continue
+        for seed in range(seeds):
+            r = run_one(z, seed, z.quick_steps if quick else z.steps)
+            rows.append(r)
+            if json_out:
+                print(json.dumps({"bench": "zoo", **r}), flush=True)
+            else:
+                print(
+                    f"zoo: {z.label} seed {seed}: final {_fmt(r['final_error'])} best {_fmt(r['best_error'])} "
+                    f"goal {_fmt(r['goal_reached_fraction'])} ({r['learner']}, {r['steps']} steps, {r['seconds']} s)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+    table = summary(rows)
+    if json_out:
+        for t in table:
+            print(json.dumps({"bench": "zoo", "summary": True, **t}))
+        return 0
+    cols = (
+        "world",
+        "learner",
+        "final_error",
+        "best_error",
+        "trustworthiness",
+        "goal_reached_fraction",
+        "steps_to_0.1",
+        "pca_error",
+        "isomap_error",
+        "regressions",
+        "drops",
+    )
+    print("| " + " | ".join(cols) + " |")
+    print("|" + "---|" * len(cols))
+    for t in table:
+        print("| " + " | ".join(_fmt(t[c]) for c in cols) + " |")
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "zoo", help="the generic program on Gymnasium, MiniGrid and panda-gym worlds", description=__doc__
+    )
+    p.add_argument("--seeds", type=int, default=3, help="seeds per world (default 3)")
+    p.add_argument("--quick", action="store_true", help="shorter runs (a smoke test, not the figures)")
+    p.add_argument("--world", action="append", metavar="NAME", help="only these entries (label substring or gym: name)")
+    p.add_argument("--json", action="store_true", help="one JSON object per run, then per world")
+    p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json))
+
+
+__all__ = ["ZOO", "ZooWorld", "main", "run_one", "sensor_peers", "summary"]
