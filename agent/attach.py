@@ -72,6 +72,7 @@ class Restored:
     program: Program
     version: int
     detector: DropDetector | None
+    steps: int = 0  # steps learned before the checkpoint was taken (the checkpoint's `steps`)
 
 
 @dataclass(frozen=True)
@@ -150,6 +151,8 @@ def attach(
     link = WorldLink(config.agent_id, spec, program, publish, detector)
     link.truth = truth
     link.version = version
+    if how == "restored" and restored is not None:
+        link.steps_before = restored.steps
     asked = spec.program or spec.kind
     if program.name != asked and asked not in PROGRAMS:
         link.event(
@@ -160,7 +163,7 @@ def attach(
     link.event(
         EventKind.ATTACHED,
         f"{spec.kind} with program {program.name} ({how}"
-        + (f" at embedding v{version})" if how == "restored" else ")")
+        + (f" at embedding v{version}, {link.steps_before:,} steps learned)" if how == "restored" else ")")
         + (f": {program.describe()}" if program.describe() else ""),
         reason=how,
         config=cfg,

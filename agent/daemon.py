@@ -427,7 +427,7 @@ class AgentDaemon:
                 detector.restore(saved.detector_state)
         except (ValueError, KeyError, TypeError, IndexError, AttributeError, ProtocolError) as e:
             raise _Unrestorable(f"cannot be restored ({type(e).__name__}: {e})") from None
-        return Restored(program, saved.version, detector)
+        return Restored(program, saved.version, detector, saved.steps)
 
     def _load_file(self, spec: WorldSpec) -> tuple[Restored, float] | None:
         """The state dir's checkpoint of this world and when it was saved, or None (see _load_checkpoint)."""
@@ -509,7 +509,7 @@ class AgentDaemon:
                 program_state=program.state(),
                 detector_state=link.detector.state() if link.detector is not None else None,
                 saved_at=time.time(),
-                steps=link.counters.steps,
+                steps=link.learned_steps,
             )
         try:
             return encode_checkpoint(ckpt)
@@ -689,12 +689,12 @@ class AgentDaemon:
         if self.threaded_links:
             att.link.start()
         log.info(
-            "world %s %s (%s, program %s, step %d, embedding v%d)",
+            "world %s %s (%s, program %s, %d steps learned, embedding v%d)",
             wid,
             att.how,
             spec.kind,
             att.link.program.name,
-            att.link.counters.steps,
+            att.link.learned_steps,
             att.link.version,
         )
 

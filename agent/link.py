@@ -114,6 +114,12 @@ class WorldLink:
     EVENT_RATE = 5.0  # bad-input and error events per second at most; counters count everything
     MAX_PROGRAM_FAILURES = 20  # consecutive program failures before the link is paused
 
+    @property
+    def learned_steps(self) -> int:
+        """Steps this state has learned from: this link's and, when it was restored from a
+        checkpoint, those before it."""
+        return self.steps_before + self.counters.steps
+
     def __init__(
         self,
         agent_id: str,
@@ -132,6 +138,7 @@ class WorldLink:
         self.inbox = Inbox(inbox_size)
         self.truth: Truth | None = None
         self.counters = LinkCounters()
+        self.steps_before = 0  # steps learned by earlier links of this state (restored from a checkpoint)
         self.version = 0
         self.state = "attached"
         self.session = spec.session

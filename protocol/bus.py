@@ -15,6 +15,7 @@ import argparse
 import collections
 import json
 import logging
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -27,6 +28,15 @@ from sensorimotor.protocol import security
 from sensorimotor.protocol.keys import DEFAULT_ENDPOINT, DEFAULT_SECURE_ENDPOINT
 
 log = logging.getLogger("sme.bus")
+
+
+def zenoh_words(e: BaseException) -> str:
+    """A zenoh error's message for people: without the Rust source location zenoh appends
+    (`at /root/.cargo/.../orchestrator.rs:447.`), which says nothing to a user."""
+    text = re.sub(r"\s+at\s+\S+\.rs:\d+\.?", "", str(e)).strip().rstrip(".!")
+    if text.startswith("Unable to connect to any of"):
+        return "nothing answered there"
+    return text or type(e).__name__
 
 
 class BusError(RuntimeError):
@@ -345,15 +355,20 @@ class Bus:
         try:
             self._session = self._open(config, wait_limit)
         except zenoh.ZError as e:
-            hint = ""
+            why = zenoh_words(e)
             if config.mode == "client":
-                hint = (
-                    f" - is `sme agent` running? (this command connects to "
-                    f"{', '.join(config.connect)}; pass --connect to point elsewhere)"
-                )
-            elif config.mode == "router":
-                hint = f" - is another agent already listening on {', '.join(config.listen)}? (--listen picks another)"
-            raise BusError(f"cannot open zenoh session ({config.describe()}): {e}{hint}") from None
+                where = ", ".join(config.connect) or "(no --connect endpoint)"
+                raise BusError(
+                    f"no agent at {where} ({why}). Start one with `sme agent` (add --listen ENDPOINT for another "
+                    f"address), or pass --connect ENDPOINT to reach the one that runs elsewhere."
+                ) from None
+            if config.mode == "router":
+                where = ", ".join(config.listen) or "(no --listen endpoint)"
+                raise BusError(
+                    f"cannot listen on {where} ({why}). Is another agent (or `sme demo`) already listening there? "
+                    "Stop it, or pass --listen ENDPOINT to pick another address."
+                ) from None
+            raise BusError(f"cannot open zenoh session ({config.describe()}): {why}") from None
         self._declared: list[Any] = []
         self._lock = threading.Lock()
         self._closed = False

@@ -247,6 +247,7 @@ def _enc_world_event(x: m.WorldEvent) -> pb.WorldEvent:
         detail=x.detail,
         step=x.step,
         timestamp=x.timestamp,
+        control_id=x.control_id,
     )
 
 
@@ -404,7 +405,7 @@ def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:
 
 
 def _dec_world_event(p: pb.WorldEvent) -> m.WorldEvent:
-    return m.WorldEvent(p.world_id, p.kind, p.reason, p.detail, p.step, p.session, p.timestamp)
+    return m.WorldEvent(p.world_id, p.kind, p.reason, p.detail, p.step, p.session, p.timestamp, p.control_id)
 
 
 def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:

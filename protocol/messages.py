@@ -386,7 +386,23 @@ class AgentEvent:
 
 @dataclass(frozen=True)
 class WorldEvent:
-    """Something a world reports about itself (e.g. an action it could not apply)."""
+    """Something a world reports about itself (e.g. an action it could not apply, a control it
+    applied or refused).
+
+    Attributes
+    ----------
+    world_id, kind : str
+        The world and what happened (`WorldEventKind`).
+    reason, detail : str
+        The machine-readable sub-kind (for controls: the control's kind) and words for people.
+    step : int
+        The observation step concerned.
+    session, timestamp
+        The world process's session and the time (seconds since the epoch).
+    control_id : int
+        For ``control_applied`` / ``control_refused``: the `Control.id` answered (0: none), so the
+        sender (`sme perturb`) knows which of its requests this is.
+    """
 
     world_id: str
     kind: str
@@ -395,6 +411,7 @@ class WorldEvent:
     step: int = 0
     session: str = ""
     timestamp: float = 0.0
+    control_id: int = 0
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ Roles and their files (`DIR/<role>.pem` certificate, `DIR/<role>.key` private ke
 - ``agent``: the daemon's router (server certificate) and the agent when it connects as a client.
 - ``world``: `sme world`, `sme replay` (it plays worlds back).
 - ``tool``: `sme record`, `watch`, `status`, `view`: read-only.
-- ``perturb``: `sme perturb`: may only put controls.
+- ``perturb``: `sme perturb`: may only put controls (and hear the worlds' answers to them).
 """
 
 from __future__ import annotations
@@ -133,6 +133,9 @@ def acl_rules() -> dict[str, Any]:
         _rule("perturb-puts", ["put"], "ingress", PERTURB_PUTS),
         _rule("perturb-checks", ["liveliness_query", "query"], "ingress", [f"{PREFIX}/alive/world/*", f"{W}/spec"]),
         _rule("perturb-receives", ["liveliness_token", "reply"], "egress", [f"{PREFIX}/alive/world/*", f"{W}/spec"]),
+        # ... and hear the world's answer (control_applied / control_refused)
+        _rule("perturb-subscribes", ["declare_subscriber"], "ingress", [f"{W}/event"]),
+        _rule("perturb-hears", ["put"], "egress", [f"{W}/event"]),
     ]
     subjects = [{"id": role, "cert_common_names": [common_name(role)]} for role in CREDENTIALS]
     policies = [

@@ -262,7 +262,7 @@ class AgentEvent(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., values: _Optional[_Mapping[str, float]] = ..., reason: _Optional[str] = ..., config: _Optional[_Union[AttachConfig, _Mapping]] = ...) -> None: ...
 
 class WorldEvent(_message.Message):
-    __slots__ = ("schema_version", "world_id", "session", "kind", "reason", "detail", "step", "timestamp")
+    __slots__ = ("schema_version", "world_id", "session", "kind", "reason", "detail", "step", "timestamp", "control_id")
     SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
     WORLD_ID_FIELD_NUMBER: _ClassVar[int]
     SESSION_FIELD_NUMBER: _ClassVar[int]
@@ -271,6 +271,7 @@ class WorldEvent(_message.Message):
     DETAIL_FIELD_NUMBER: _ClassVar[int]
     STEP_FIELD_NUMBER: _ClassVar[int]
     TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    CONTROL_ID_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     world_id: str
     session: str
@@ -279,7 +280,8 @@ class WorldEvent(_message.Message):
     detail: str
     step: int
     timestamp: float
-    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., kind: _Optional[str] = ..., reason: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ...) -> None: ...
+    control_id: int
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., kind: _Optional[str] = ..., reason: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., control_id: _Optional[int] = ...) -> None: ...
 
 class LinkStatus(_message.Message):
     __slots__ = ("world_id", "kind", "program", "state", "steps", "episodes", "embedding_version", "reward_mean", "rejected", "last_procrustes_error", "detector_statistic", "drops", "dropped")

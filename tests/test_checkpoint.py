@@ -370,3 +370,29 @@ def test_daemon_sets_aside_a_state_that_does_not_fit_the_program(tmp_path, caplo
         assert daemon._load_checkpoint(world.spec()) is None
     assert "cannot be restored" in caplog.text
     assert [f for f in os.listdir(tmp_path) if ".ckpt.npz.bad-" in f]
+
+
+def test_a_restored_world_reports_the_steps_it_has_learned(tmp_path):
+    """Not "step 0, embedding v27": a link restored from a checkpoint counts the steps learned
+    before it, says so in its `attached` event, and saves them again in its next checkpoint."""
+    from sensorimotor.agent.attach import AgentConfig, attach
+
+    world = GridWorld(seed=0)
+    program = make_program(world.spec(), 0)
+    daemon = AgentDaemon(bus=None, state_dir=str(tmp_path))
+    link = WorldLink("a", world.spec(), program, Recorder(), None)
+    daemon.links[world.world_id] = link
+    lockstep(world, 120, [link])
+    assert link.learned_steps == 120
+    daemon.checkpoint()
+    restored = daemon._load_checkpoint(world.spec())
+    assert restored is not None and restored.steps == 120
+    out = Recorder()
+    att = attach(world.spec(), AgentConfig("a"), out, restored=restored)
+    assert att.how == "restored" and att.link.counters.steps == 0 and att.link.learned_steps == 120
+    (ev,) = [o for o in out.outputs if getattr(o, "kind", "") == "attached"]
+    assert "120 steps learned" in ev.detail, ev.detail
+    lockstep(world, 30, [att.link])
+    daemon.links[world.world_id] = att.link
+    daemon.checkpoint()
+    assert read_checkpoint(str(tmp_path / f"{world.world_id}.ckpt.npz")).steps == 150

@@ -308,3 +308,63 @@ def test_demo_into_a_reader_that_closes_after_one_line(endpoint):
     code, err = stops_cleanly_after_one_line(demo, timeout=60)
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
     assert code == 1
+
+
+@pytest.mark.parametrize("path", all_commands(), ids=lambda c: " ".join(c))
+def test_every_help_page_has_the_same_layout(path, monkeypatch):
+    """usage, description, options (zenoh flags in their group), exit statuses; every paragraph
+    wrapped to the terminal's width (no raw layout of its own)."""
+    monkeypatch.setenv("COLUMNS", "100")
+    text = subparser(path).format_help()
+    assert text.startswith(f"usage: sme {' '.join(path)}"), text[:80]
+    assert "\noptions:\n" in text and text.rstrip().split("\n\n")[-1].startswith("exit status: 0 ok")
+    too_long = [ln for ln in text.splitlines() if len(ln) > 100]
+    assert not too_long, too_long
+
+
+def test_status_prints_a_table_not_a_dict():
+    from sensorimotor.tools.status import agent_lines
+
+    d = {
+        "agent": "a0",
+        "uptime": 12.5,
+        "owns": ["g1"],
+        "counters": {"owned": 1, "claimed": 1, "dropped": 0, "released": 0},
+        "links": [
+            {
+                "world": "g1",
+                "kind": "gridworld",
+                "program": "gridworld",
+                "state": "attached",
+                "steps": 12345,
+                "episodes": 1234,
+                "embedding_version": 27,
+                "last_procrustes_error": 0.0102,
+                "reward_mean": 0.41,
+                "rejected": {"malformed": 2},
+                "dropped": 0,
+            }
+        ],
+    }
+    lines = agent_lines(d)
+    text = "\n".join(lines)
+    assert "{" not in text and "}" not in text, text
+    assert lines[0] == "agent a0: up 12.5 s; owns g1"
+    assert "counters: claimed 1, owned 1 (zeros not shown)" in lines[1]
+    header, row = lines[2], lines[3]
+    assert header.split() == [
+        "world",
+        "kind",
+        "program",
+        "state",
+        "steps",
+        "episodes",
+        "embedding",
+        "procrustes",
+        "reward",
+        "dropped",
+        "rejected",
+    ]
+    assert row.split()[:8] == ["g1", "gridworld", "gridworld", "attached", "12,345", "1,234", "v27", "0.0102"]
+    assert header.index("embedding") == row.index("v27")  # columns line up
+    assert row.rstrip().endswith("malformed 2")

@@ -74,3 +74,23 @@ def test_sme_world_gym_frozenlake_is_learned_over_the_bus(procs, endpoint, monke
 
     assert wait_for(learned, 90, every=0.5), seen[-5:]
     assert seen[-1][0] == "generic", seen
+
+
+def test_a_script_that_never_closes_its_busenv_still_exits(procs, endpoint):
+    """The README's BusEnv loop without `env.close()`: the interpreter exits at the end of the script
+    (a zenoh session with callbacks used to keep it alive until killed)."""
+    import subprocess
+    import sys
+
+    procs.start("world", "gridworld", "--id", "g9", "--param", "size=3", "--external", "--connect", endpoint)
+    script = (
+        "from sensorimotor.worlds.gym_bus import BusEnv\n"
+        f"env = BusEnv('g9', listen={endpoint!r}, timeout=30)\n"
+        "obs, info = env.reset()\n"
+        "for _ in range(20):\n"
+        "    obs, r, term, trunc, info = env.step(env.action_space.sample())\n"
+        "    if term: obs, info = env.reset()\n"
+        "print('done', flush=True)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "done" in out.stdout, out.stderr

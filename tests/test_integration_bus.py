@@ -132,10 +132,13 @@ def test_bad_input_is_counted_answered_and_harmless(procs, endpoint):
 def test_status_and_watch_fail_clearly_without_agent(procs, endpoint):
     st = procs.start("status", "--connect", endpoint)
     st.wait(20)
-    assert st.returncode == 2 and "is `sme agent` running?" in st.stderr.read()
+    err = st.stderr.read()
+    # what to do, and no zenoh internals (its Rust source paths)
+    assert st.returncode == 2 and f"no agent at {endpoint}" in err and "Start one with `sme agent`" in err, err
+    assert ".rs:" not in err and ".cargo" not in err, err
     w = procs.start("watch", "--count", "1", "--timeout", "1", "--connect", endpoint)
     w.wait(20)
-    assert w.returncode == 2 and "is `sme agent` running?" in w.stderr.read()
+    assert w.returncode == 2 and "Start one with `sme agent`" in w.stderr.read()
 
 
 def test_world_waits_for_agent_and_stops_on_sigterm(procs, endpoint):

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import subprocess
+import sys
 import typing
 from typing import Any
 
@@ -207,3 +209,61 @@ def test_over_the_bus_a_refused_control_is_reported_and_the_world_stays_up(procs
         assert "sd 0.01" in world_events(WorldEventKind.CONTROL_APPLIED)[0].detail
     assert wait_for(lambda: link(status(endpoint), "r7").steps > steps + 20, 30)
     assert world.poll() is None and agent.poll() is None
+
+
+def _sme(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
+
+
+@pytest.mark.integration
+def test_sme_perturb_answers_with_the_worlds_words(procs, endpoint):
+    """`sme perturb` waits for the world's answer to its request id: exit 0 with what the world
+    applied; exit 2, nothing sent, for what the world kind's declaration rules out."""
+    procs.start("agent", "--listen", endpoint, "-q")
+    procs.start(
+        "world", "retina", "--id", "r8", "--connect", endpoint, "-q", "--param", "supersample=1",
+        "--param", "layers=2", "--param", "fields=8",
+    )  # fmt: skip
+    procs.start("world", "gridworld", "--id", "g8", "--connect", endpoint, "-q")
+    assert wait_for(lambda: (ln := link(status(endpoint), "r8")) is not None and ln.steps > 5, 60)
+    ok = _sme("perturb", "noise", "--world", "r8", "--param", "sd=0.01", "--connect", endpoint)
+    assert ok.returncode == 0, ok.stderr
+    assert "world r8 applied noise" in ok.stdout and "sd 0.01" in ok.stdout, ok.stdout
+    out = _sme("perturb", "lesion", "--world", "r8", "--param", "radius=-1", "--connect", endpoint)
+    assert out.returncode == 2 and "not sent" in out.stderr, (out.stdout, out.stderr)
+    assert "radius" in out.stderr and "0.0..512.0" in out.stderr, out.stderr
+    assert wait_for(lambda: link(status(endpoint), "g8") is not None, 30)
+    out = _sme("perturb", "reverse", "--world", "g8", "--connect", endpoint)
+    assert out.returncode == 2 and "gridworld has no perturbation 'reverse'" in out.stderr, out.stderr
+    assert "sent" not in out.stdout
+
+
+@pytest.mark.integration
+def test_sme_perturb_exits_1_when_the_world_refuses_or_does_not_answer(endpoint):
+    """A world of a kind this installation does not know decides alone: its refusal is exit 1 with
+    its words; a world that never answers is exit 1 after --timeout, saying why."""
+    from sensorimotor.protocol.messages import ActionSpace, SensorSpec, WorldEvent, WorldSpec
+
+    seen: list[Control] = []
+    with Bus(BusConfig.for_role("agent", endpoint)) as bus:
+        spec = WorldSpec("x1", "outside-kind", (SensorSpec("s", "float32", (1,)),), ActionSpace(n=2))
+        bus.queryable(keys.world_spec("x1"), lambda k, p: codec.encode(spec), codec.schema_name(WorldSpec))
+
+        def on_ctl(msg):
+            ctl = codec.decode(Control, msg.payload)
+            seen.append(ctl)
+            if ctl.kind == "silence":
+                return
+            ev = WorldEvent("x1", WorldEventKind.CONTROL_REFUSED, ctl.kind, "too hot to melt", control_id=ctl.id)
+            bus.put(keys.world_event("x1"), codec.encode(ev), codec.schema_name(WorldEvent))
+
+        bus.subscribe(keys.world_ctl("x1"), on_ctl)
+        bus.token(keys.alive_world("x1"))
+        out = _sme("perturb", "melt", "--world", "x1", "--connect", endpoint)
+        assert out.returncode == 1, (out.stdout, out.stderr)
+        assert "world x1 refused melt: too hot to melt" in out.stderr
+        assert seen and seen[-1].id != 0
+        out = _sme("perturb", "silence", "--world", "x1", "--timeout", "1", "--connect", endpoint)
+        assert out.returncode == 1 and "did not answer within 1 s" in out.stderr, out.stderr

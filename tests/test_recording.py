@@ -211,3 +211,31 @@ def test_recorder_keeps_up_with_two_lockstep_worlds():
     r = run(steps=2000, obs_bytes=16384)
     assert r["all_written"], r
     assert r["written"] == r["published"] > 8000
+
+
+def test_offline_replay_plots_each_worlds_latest_embedding(session, tmp_path):
+    path, _ = session
+    out = subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", "replay", path, "--offline", "--plot", str(tmp_path)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    png = tmp_path / "r1.png"
+    assert png.exists() and f"wrote {png}" in out.stderr and "coloured by true position" in out.stderr, out.stderr
+
+
+def test_replay_all_without_an_agent_is_the_router_itself(procs, session):
+    """`sme replay FILE --what all` with no agent running: nothing to wait for; `sme watch` on the
+    same endpoint sees the recorded embeddings."""
+    path, _ = session
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    rp = procs.start("replay", path, "--what", "all", "--speed", "10", "--loop", "--connect", ep)
+    err = Lines(rp.stderr)
+    assert wait_for(lambda: err.has("this replay is the router there"), 60), err.lines
+    watch = procs.start("watch", "--json", "--count", "1", "--timeout", "60", "--connect", ep)
+    assert watch.wait(90) == 0
+    row = json.loads(watch.stdout.readline())
+    assert row["type"] in ("embedding", "event") and row["world"] == "r1", row

@@ -151,6 +151,8 @@ def test_only_the_right_credential_reaches_a_world(procs, tls: str, secure_dir: 
                 assert len(emb_world) == 0, "the world credential received an embedding"
 
             # the perturb credential may perturb (applied between steps, so reported after the next one)
+            # and hears the world's answer (`sme perturb` waits for it)
+            answers = perturb.inbox(keys.world_event(WID))
             perturb.put(keys.world_ctl(WID), perturb_control, codec.schema_name(Control))
             assert drain(events, 1.0) == []
 
@@ -164,7 +166,9 @@ def test_only_the_right_credential_reaches_a_world(procs, tls: str, secure_dir: 
                 )
             reported = [codec.decode(WorldEvent, m.payload) for m in drain(events, 3.0)]
             controls = [e for e in reported if e.kind in ("control_applied", "control_refused")]
-            assert len(controls) == 1, reported
+            assert len(controls) == 1 and controls[0].control_id == 7, reported
+            heard = [codec.decode(WorldEvent, m.payload) for m in drain(answers, 1.0)]
+            assert [e.control_id for e in heard if e.kind in ("control_applied", "control_refused")] == [7], heard
 
 
 def test_agent_and_world_learn_on_the_secure_bus(procs, tls: str, secure_dir: str) -> None:
@@ -178,9 +182,10 @@ def test_agent_and_world_learn_on_the_secure_bus(procs, tls: str, secure_dir: st
     assert errs[0] > 0.5 and min(errs[-2:]) < 0.05, errs
     st = _sme("status", "--json", "--connect", tls, *s)
     assert st.returncode == 0, st.stderr
-    # the perturb credential sees the world alive and sends its control
+    # the perturb credential sees the world alive and reads its spec: a gridworld declares no
+    # perturbations, so `sme perturb` refuses the control before sending it
     pt = _sme("perturb", "heal", "--world", WID, "--connect", tls, *s)
-    assert pt.returncode == 0 and "sent heal" in pt.stdout, pt.stderr
+    assert pt.returncode == 2 and "gridworld has no perturbation 'heal'" in pt.stderr, pt.stderr
     # the same tool without the credential cannot even connect
     assert _sme("status", "--connect", tls).returncode == 2
     assert status(tls) is None  # a plain client on the tls port gets nothing

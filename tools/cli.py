@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import textwrap
 from collections.abc import Iterator
 
 from sensorimotor.tools import (
@@ -31,6 +30,7 @@ from sensorimotor.tools.common import (
     EXIT_FAILURE,
     EXIT_INTERRUPTED,
     EXIT_USAGE,
+    HelpFormatter,
     MissingExtra,
     UsageError,
     add_verbosity,
@@ -57,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="sensorimotor-embedding: an agent that learns the geometry of its body and sensors from "
         "raw experience, over Eclipse Zenoh. Start with `sme demo`.",
         epilog=EXIT_CODES_EPILOG,
+        formatter_class=HelpFormatter,
     )
     add_verbosity(p)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
@@ -65,11 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_recover_parser(sub)
     for child in _subparsers(p):
         add_verbosity(child)
-        epilog = EXIT_CODES_EPILOG
-        formatter = child.formatter_class
-        if isinstance(formatter, type) and issubclass(formatter, argparse.RawDescriptionHelpFormatter):
-            epilog = textwrap.fill(epilog, 100)  # raw formatters print it as given
-        child.epilog = f"{child.epilog}\n\n{epilog}" if child.epilog else epilog
+        child.formatter_class = HelpFormatter  # one layout for every help page
+        child.epilog = f"{child.epilog}\n\n{EXIT_CODES_EPILOG}" if child.epilog else EXIT_CODES_EPILOG
     return p
 
 

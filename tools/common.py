@@ -8,9 +8,11 @@ import importlib
 import json
 import logging
 import math
+import re
 import select
 import socket
 import sys
+import textwrap
 from types import ModuleType
 from typing import Any
 
@@ -26,6 +28,19 @@ EXIT_CODES_EPILOG = (
     "(Ctrl-C) before the command finished. Commands that run until stopped (agent, world, record, view, "
     "demo, replay, watch without --count) finish cleanly on Ctrl-C or SIGTERM and exit with their usual status."
 )
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """The one layout of every `sme` help page: usage, the description, the options (the zenoh
+    flags in their own group), the exit statuses. Each paragraph of a description or epilog (blank
+    lines between them) is wrapped to the terminal's width; argparse's default joins them all."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        paragraphs = [p for p in re.split(r"\n\s*\n", text.strip()) if p.strip()]
+        return "\n\n".join(
+            textwrap.fill(" ".join(p.split()), width, initial_indent=indent, subsequent_indent=indent)
+            for p in paragraphs
+        )
 
 
 class UsageError(ValueError):

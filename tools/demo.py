@@ -1,4 +1,11 @@
-"""`sme demo`: the agent daemon and one world in one command, with progress and a summary."""
+"""`sme demo`: the agent daemon and one world in one command, with progress and an honest summary.
+
+Unbounded (no --seconds, no --steps) it runs 15 s and then, if the world has not been embedded yet
+and can be, goes on until its first embedding (at most 180 s): `sme demo --world retina` shows a
+map although the retina's first comes after 1,000 saccades. The summary says the first, best and
+final Procrustes error, whether the last versions are near the best, and, when the world was not
+embedded or cannot be scored, why and what to do (`tools.summary`). `--plot DIR` writes the final
+embedding as a PNG (`tools.plot`)."""
 
 from __future__ import annotations
 
@@ -10,46 +17,54 @@ import time
 from typing import Any
 
 from sensorimotor.agent.daemon import AgentDaemon
-from sensorimotor.protocol import keys
-from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.protocol.bus import Bus, BusConfig, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.messages import AgentEvent, Embedding
 from sensorimotor.protocol.params import assignments
 from sensorimotor.tools.common import format_embedding, format_event, output_closed
+from sensorimotor.tools.summary import verdict
 from sensorimotor.worlds.node import WorldNode
 from sensorimotor.worlds.registry import WORLDS, make_world
+
+DEFAULT_SECONDS = 15.0  # an unbounded demo runs this long at least ...
+WAIT_FOR_FIRST = 180.0  # ... and, while the world has no embedding yet, at most this long
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
         help="agent + a world in one command, with progress and a summary",
-        description="Start the agent daemon (zenoh router on --listen, loopback) and a world "
-        "node connected to it, show each embedding version as it arrives, and print a summary. "
-        "Stops after --seconds, --steps or Ctrl-C.",
+        description="Start the agent daemon (a zenoh router, loopback by default) and a world node connected to "
+        "it, show each embedding version as it arrives, and print a summary: first, best and final error and "
+        "whether the map held, or why the world was not embedded. Without --seconds or --steps it runs "
+        f"{DEFAULT_SECONDS:g} s, and longer (at most {WAIT_FOR_FIRST:g} s) until the world's first embedding; "
+        "Ctrl-C stops it.",
     )
-    p.add_argument("--world", default="gridworld", help="world to run: " + ", ".join(sorted(WORLDS)))
+    p.add_argument("--world", default="gridworld", help="world to run: " + ", ".join(sorted(WORLDS)) + ", gym:ENV_ID")
     p.add_argument(
         "--param",
         action="append",
         metavar="K=V",
         help="world parameter, repeatable (e.g. barrier=true; see `sme world NAME --list-params`)",
     )
-    p.add_argument("--seconds", type=float, default=15.0, help="run time in seconds (default 15)")
-    p.add_argument("--steps", type=int, default=None, help="stop after this many world steps (and at most --seconds)")
+    p.add_argument(
+        "--seconds",
+        type=float,
+        default=None,
+        metavar="S",
+        help=f"run exactly this long (default: {DEFAULT_SECONDS:g} s, and on until the first embedding)",
+    )
+    p.add_argument(
+        "--steps", type=int, default=None, metavar="N", help="stop after this many world steps (and at most --seconds)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of world and agent")
     p.add_argument(
-        "--listen",
-        default=None,
-        metavar="ENDPOINT",
-        help=f"where the daemon listens (default {keys.DEFAULT_ENDPOINT}, with --secure {keys.DEFAULT_SECURE_ENDPOINT})",
-    )
-    p.add_argument(
-        "--secure",
+        "--plot",
         default=None,
         metavar="DIR",
-        help="run on a locked-down bus with the credentials of `sme secure init DIR`: the agent listens "
-        "with mutual TLS and access control (agent credential), the world connects with the world credential",
+        help="write the final embedding as DIR/<world>.png: truth, the map coloured by true position, "
+        "the eigenvalue spectrum",
     )
+    add_bus_arguments(p, "agent")
     p.set_defaults(func=main_args, log_default=-1)  # quiet logs unless -v: the demo prints its own progress
 
 
@@ -57,15 +72,21 @@ def main_args(args: argparse.Namespace) -> int:
     if args.steps is not None and args.steps < 1:
         print("sme demo: --steps must be >= 1", file=sys.stderr)
         return 2
+    if args.seconds is not None and not args.seconds > 0:
+        print("sme demo: --seconds must be > 0", file=sys.stderr)
+        return 2
     try:
         world = make_world(args.world, None, args.seed, assignments(args.param))
     except ValueError as e:
         print(f"sme demo: {e}", file=sys.stderr)
         return 2
     wid = world.world_id
-    last: dict[str, Any] = {}
-    errors: list[float] = []
+    embeddings: list[Embedding] = []
+    events: list[AgentEvent] = []
     t0 = time.monotonic()
+    # bounded: exactly as asked; unbounded: DEFAULT_SECONDS, then on until the first embedding
+    bounded = args.seconds is not None or args.steps is not None
+    seconds = args.seconds if args.seconds is not None else (WAIT_FOR_FIRST if args.steps else DEFAULT_SECONDS)
 
     stop = threading.Event()
     broken_pipe = threading.Event()
@@ -83,15 +104,19 @@ def main_args(args: argparse.Namespace) -> int:
     def on_output(channel: str, msg: Any) -> None:
         stamp = f"{time.monotonic() - t0:6.1f}s "
         if isinstance(msg, Embedding):
-            last["embedding"] = msg
+            embeddings.append(msg)
             say(stamp + format_embedding(msg))
-            if msg.procrustes_error is not None:
-                errors.append(msg.procrustes_error)
-        elif isinstance(msg, AgentEvent) and msg.kind not in ("policy_iteration", "paused"):
-            say(stamp + format_event(msg))
+        elif isinstance(msg, AgentEvent):
+            events.append(msg)
+            if msg.kind not in ("policy_iteration", "paused") or msg.reason == "no_start_states":
+                say(stamp + format_event(msg))
 
-    agent_cfg = BusConfig.for_role("agent", args.listen, args.secure)
-    endpoint = agent_cfg.listen[0]
+    try:
+        agent_cfg = bus_config_from_args(args, "agent")
+    except BusError as e:
+        print(f"sme demo: {e}", file=sys.stderr)
+        return 2
+    endpoint = (agent_cfg.listen or agent_cfg.connect or ("",))[0]
     warning = agent_cfg.exposure_warning()
     if warning:
         print(f"sme demo: WARNING: {warning}", file=sys.stderr, flush=True)
@@ -102,25 +127,45 @@ def main_args(args: argparse.Namespace) -> int:
         return 2
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    length = f"{seconds:g} s" if bounded else f"{seconds:g} s (longer until its first embedding)"
     say(
-        f"sme demo: agent on {endpoint}{' (mutual TLS + access control)' if args.secure else ''}, world {wid!r} ({world.kind}), {args.seconds:g} s; Ctrl-C stops"
+        f"sme demo: agent on {endpoint}{' (mutual TLS + access control)' if args.secure else ''}, world {wid!r} ({world.kind}), {length}; Ctrl-C stops"
     )
+    spec = world.spec()
+    told_wait = False
     with agent_bus, world:
         daemon = AgentDaemon(agent_bus, seed=args.seed, on_output=on_output)
         daemon.start()
         dthread = threading.Thread(target=daemon.run, daemon=True)
         dthread.start()
-        with Bus(BusConfig.for_role("world", endpoint, args.secure)) as world_bus:
+        try:
+            world_bus = Bus(BusConfig.for_role("world", endpoint, args.secure))
+        except BusError as e:
+            print(f"sme demo: {e}", file=sys.stderr)
+            daemon.stop()
+            daemon.close()
+            return 2
+        with world_bus:
             node = WorldNode(world, world_bus, wid, max_steps=args.steps)
             nthread = threading.Thread(target=node.run, daemon=True)
             nthread.start()
             next_tick = 5.0
-            while not stop.is_set() and time.monotonic() - t0 < args.seconds and nthread.is_alive():
+            while not stop.is_set() and nthread.is_alive():
                 stop.wait(0.1)
                 if output_closed():
                     broken_pipe.set()
                     break
                 el = time.monotonic() - t0
+                if el >= seconds:
+                    can_embed = spec.n_starts >= 2 and not any(e.reason == "no_start_states" for e in events)
+                    if bounded or embeddings or not can_embed or el >= WAIT_FOR_FIRST:
+                        break
+                    if not told_wait:
+                        told_wait = True
+                        say(
+                            f"{el:6.1f}s [{wid}] no embedding yet: waiting for the first "
+                            f"(at most {WAIT_FOR_FIRST:g} s; --seconds S bounds the run)"
+                        )
                 if el >= next_tick:
                     next_tick += 5.0
                     say(
@@ -129,6 +174,7 @@ def main_args(args: argparse.Namespace) -> int:
                     )
             node.stop()
             nthread.join(timeout=5)
+        final_truth = world.truth()  # (after a perturbation it may differ from the first)
         daemon.stop()
         dthread.join(timeout=5)
         daemon.close()
@@ -138,20 +184,20 @@ def main_args(args: argparse.Namespace) -> int:
     el = time.monotonic() - t0
     print("\nsummary")
     print(
-        f"  world {wid} ({world.kind}): {node.stats.steps} lockstep steps in {el:.1f} s "
-        f"({node.stats.steps / max(el, 1e-9):,.0f} steps/s), {node.stats.episodes} episodes"
+        f"  world {wid} ({world.kind}): {node.stats.steps:,} lockstep steps in {el:.1f} s "
+        f"({node.stats.steps / max(el, 1e-9):,.0f} steps/s), {node.stats.episodes:,} episodes"
     )
     for ln in status.links:
-        print(f"  link: {ln.embedding_version} embedding versions, rejected inputs {ln.rejected or 0}")
-    emb = last.get("embedding")
-    if emb is None:
-        print("  no embedding yet: run longer (--seconds)")
-        return 1
-    err = "n/a" if emb.procrustes_error is None else f"{emb.procrustes_error:.4f}"
-    print(
-        f"  final embedding v{emb.version} ({emb.trigger}): {emb.coordinates.shape[0]} points in "
-        f"{emb.coordinates.shape[1]}-D, Procrustes error against truth {err}"
-    )
-    if len(errors) > 1:
-        print(f"  Procrustes error fell from {errors[0]:.4f} (v1) to {min(errors):.4f} (best) as the agent learned")
-    return 0
+        rejected = ", ".join(f"{k} {v}" for k, v in sorted(ln.rejected.items())) or "none"
+        print(f"  link: {ln.embedding_version} embedding versions, rejected inputs: {rejected}")
+    result = verdict(embeddings, events, has_truth=final_truth is not None, n_starts=spec.n_starts, seconds=el)
+    for line in result.lines:
+        print(line)
+    if args.plot and embeddings:
+        from sensorimotor.tools.plot import plot_embedding
+
+        last = [e for e in embeddings if e.trigger != "policy_map"][-1]
+        drawn = plot_embedding(last, final_truth, args.plot)
+        how = "coloured by true position" if drawn.coloured_by_truth else "no truth to colour by"
+        print(f"  wrote {drawn.path}: embedding v{last.version}, {drawn.n_points} points, {how}")
+    return 0 if result.embedded else 1

@@ -1,18 +1,24 @@
 """`sme perturb KIND --world ID`: change a running world's body or sensors. The agent is not told.
 
-The world checks the parameters against its declaration (`World.Perturbations`) and refuses a bad
-control with a `control_refused` world event before anything changes; `sme perturb --list` prints
-every world kind's perturbations and their parameter tables."""
+The command answers with the world's words: it sends a Control with a fresh request id, waits for
+the world's `control_applied` or `control_refused` WorldEvent carrying that id, prints what the
+world said and exits 0 (applied) or 1 (refused, or no answer in --timeout). What the declaration of
+the running world's kind (`World.Perturbations`, read from its spec's kind) already rules out, an
+unknown kind or a parameter out of range, is refused before anything is sent (exit 2).
+`sme perturb --list` prints every world kind's perturbations and their parameter tables."""
 
 from __future__ import annotations
 
 import argparse
+import queue
+import secrets
 import sys
 import time
 
 from sensorimotor.protocol import codec, keys
-from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from sensorimotor.protocol.messages import Control
+from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import Control, WorldEvent, WorldEventKind, WorldSpec
 from sensorimotor.tools.common import parse_params
 
 KINDS = {
@@ -73,8 +79,51 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="morph: cameras one above the other (--no-vertical: side by side)",
     )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="seconds to wait for the world's answer (default 10; a world applies controls between steps, "
+        "so it answers once something steps it)",
+    )
     add_bus_arguments(p, "perturb")
     p.set_defaults(func=main_args)
+
+
+def refuse_locally(world_kind: str, ctl: Control) -> str | None:
+    """Why the declaration of world kind `world_kind` already rules `ctl` out (None: it does not, or
+    the kind is not one this installation knows, e.g. a world written elsewhere: then only the world
+    can say)."""
+    from sensorimotor.protocol.params import ParamError
+    from sensorimotor.worlds.base import PerturbationError, check_perturbation
+    from sensorimotor.worlds.registry import world_perturbations
+
+    try:
+        declared = world_perturbations(world_kind)
+    except (ParamError, ImportError, AttributeError):
+        return None
+    try:
+        check_perturbation(world_kind, declared, ctl)
+    except PerturbationError as e:
+        return str(e)
+    return None
+
+
+def _spec(bus: Bus, world: str) -> WorldSpec | None:
+    try:
+        replies = bus.get(keys.world_spec(world), timeout=2.0)
+        return codec.decode(WorldSpec, replies[0].payload) if replies else None
+    except (BusError, ProtocolError):
+        return None
+
+
+def answers(ctl: Control, ev: WorldEvent) -> bool:
+    """Whether world event `ev` is the world's answer to `ctl` (by request id; a world that does not
+    echo ids, `control_id` 0, is matched by the control's kind)."""
+    if ev.kind not in (WorldEventKind.CONTROL_APPLIED, WorldEventKind.CONTROL_REFUSED):
+        return False
+    return ev.control_id == ctl.id if ev.control_id else ev.reason == ctl.kind
 
 
 def main_args(args: argparse.Namespace) -> int:
@@ -83,6 +132,9 @@ def main_args(args: argparse.Namespace) -> int:
         return 0
     if not args.kind or not args.world:
         print("sme perturb: KIND and --world ID are required (see `sme perturb --list`)", file=sys.stderr)
+        return 2
+    if not args.timeout > 0:
+        print("sme perturb: --timeout must be > 0", file=sys.stderr)
         return 2
     try:
         keys.check_id(args.world, "world id")
@@ -101,16 +153,45 @@ def main_args(args: argparse.Namespace) -> int:
             params["baseline"] = str(args.baseline)
         if args.vertical is not None:
             params["vertical"] = str(args.vertical).lower()
-    ctl = Control(args.world, args.kind, params, time.time_ns() & 0xFFFFFFFF, time.time())
+    ctl = Control(args.world, args.kind, params, secrets.randbits(63) | 1, time.time())
+    got: queue.Queue[WorldEvent] = queue.Queue()
+
+    def on_event(msg: BusMessage) -> None:
+        try:
+            ev = codec.decode(WorldEvent, msg.payload)
+        except ProtocolError:
+            return
+        if answers(ctl, ev):
+            got.put(ev)
+
     try:
         with Bus(bus_config_from_args(args, "perturb")) as bus:
             if not bus.alive(keys.alive_world(args.world), timeout=2.0):
                 print(f"sme perturb: no world {args.world!r} is alive on the bus (see `sme status`)", file=sys.stderr)
                 return 1
+            spec = _spec(bus, args.world)
+            why = refuse_locally(spec.kind, ctl) if spec is not None else None
+            if why is not None:
+                print(f"sme perturb: not sent: {why} (world {args.world} is a {spec.kind})", file=sys.stderr)
+                return 2
+            bus.subscribe(keys.world_event(args.world), on_event)
             bus.put(keys.world_ctl(args.world), codec.encode(ctl), codec.schema_name(Control))
-            time.sleep(0.2)  # let the put leave before the session closes
+            print(f"sent {args.kind} {dict(ctl.params) or ''} to world {args.world}".replace("  ", " "), flush=True)
+            try:
+                ev = got.get(timeout=args.timeout)
+            except queue.Empty:
+                print(
+                    f"sme perturb: world {args.world} did not answer within {args.timeout:g} s. A world applies "
+                    "controls between steps, so it answers once an agent steps it: is one attached (`sme status`)? "
+                    "The control stays queued and is applied at the world's next step.",
+                    file=sys.stderr,
+                )
+                return 1
     except BusError as e:
         print(f"sme perturb: {e}", file=sys.stderr)
         return 2
-    print(f"sent {args.kind} {dict(ctl.params) or ''} to world {args.world}")
-    return 0
+    if ev.kind == WorldEventKind.CONTROL_APPLIED:
+        print(f"world {args.world} applied {args.kind}: {ev.detail}")
+        return 0
+    print(f"sme perturb: world {args.world} refused {args.kind}: {ev.detail}", file=sys.stderr)
+    return 1

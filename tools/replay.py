@@ -349,8 +349,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--what",
         choices=["world", "all"],
         default="world",
-        help="world: the worlds' side only, for a fresh agent to learn from (default); all: every "
-        "recorded message (embeddings and events too), for `sme watch`/`sme view`",
+        help="world: the worlds' side only, for a fresh agent to learn from (default; waits for `sme agent`); "
+        "all: every recorded message (embeddings and events too), for `sme watch`/`sme view`, no agent needed "
+        "(with none running the replay is the router on the default endpoint)",
     )
     p.add_argument(
         "--answer-timeout",
@@ -369,6 +370,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", default=None, metavar="FILE", help="--offline: write embeddings (JSON lines, with coordinates) to FILE"
     )
+    p.add_argument(
+        "--plot",
+        default=None,
+        metavar="DIR",
+        help="--offline: write each world's latest embedding as DIR/<world>.png (truth, the map coloured by "
+        "true position, the eigenvalue spectrum)",
+    )
     p.add_argument("--seed", type=int, default=None, help="--offline: program seed (default: as recorded)")
     p.add_argument(
         "--detector", choices=sorted(DETECTORS), default=None, help="--offline: detector (default: as recorded)"
@@ -377,11 +385,33 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=main_args)
 
 
+def _open_bus(args: argparse.Namespace) -> Bus:
+    """The replay's session. `--what world` waits for an agent to learn from it (it is a client of
+    the agent's router). `--what all` needs no agent: unless --mode or --listen says otherwise, it
+    joins a router that answers on the --connect endpoint (default tcp/127.0.0.1:7447) and, when none
+    does, is the router there itself, so `sme watch` and `sme view` (clients of it) see the replay."""
+    cfg = bus_config_from_args(args, "world")
+    if args.what != "all" or args.mode or args.listen:
+        return Bus(cfg)
+    try:
+        return Bus(replace(cfg, retry=False))  # a router is up (an agent, or another replay): join it
+    except BusError:
+        pass
+    log.warning(
+        "no agent at %s: this replay is the router there (`sme watch` and `sme view` connect to it)",
+        ", ".join(cfg.connect),
+    )
+    return Bus(replace(cfg, mode="router", connect=(), listen=cfg.connect, retry=False))
+
+
 def main_args(args: argparse.Namespace) -> int:
     import os
 
     if not os.path.exists(args.file):
         print(f"sme replay: no such file {args.file}", file=sys.stderr)
+        return 2
+    if args.plot and not args.offline:
+        print("sme replay: --plot goes with --offline (a live replay is drawn by `sme view`)", file=sys.stderr)
         return 2
     if args.offline:
         res = replay_offline(args.file, args.seed, args.detector)
@@ -396,6 +426,18 @@ def main_args(args: argparse.Namespace) -> int:
                 out.write(json.dumps(embedding_dict(e, coordinates=True)) + "\n")
         if out:
             out.close()
+        if args.plot:
+            from sensorimotor.tools.plot import plot_embedding
+
+            latest = {e.world_id: e for e in res.embeddings if e.trigger != "policy_map"}
+            for wid, e in sorted(latest.items()):
+                link = res.links.get(wid)
+                drawn = plot_embedding(e, link.truth if link is not None else None, args.plot)
+                how = "coloured by true position" if drawn.coloured_by_truth else "no truth to colour by"
+                print(
+                    f"sme replay --offline: wrote {drawn.path}: embedding v{e.version}, {drawn.n_points} points, {how}",
+                    file=sys.stderr,
+                )
         same, n = res.compare()
         print(
             f"sme replay --offline: {len(res.embeddings)} embeddings; {same} of {n} identical (same bytes) to "
@@ -413,7 +455,7 @@ def main_args(args: argparse.Namespace) -> int:
     import signal
 
     try:
-        bus = Bus(bus_config_from_args(args, "world"))
+        bus = _open_bus(args)
     except BusError as e:
         print(f"sme replay: {e}", file=sys.stderr)
         return 2

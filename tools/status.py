@@ -60,20 +60,74 @@ def fetch_bus(bus: Bus, timeout: float) -> dict:
     return {"agents": agents, "owners": owners, "worlds": worlds, "unowned": [w for w in worlds if w not in owners]}
 
 
-def print_agent(d: dict) -> None:
-    """One agent's status as text (see `status_dict`)."""
-    owns = f"  owns {', '.join(d['owns']) or 'nothing'}" if "owns" in d else ""
-    print(f"agent {d['agent']}  up {d['uptime']:.1f} s{owns}  counters {d['counters']}")
+def table(rows: list[list[str]], header: list[str], indent: str = "  ") -> list[str]:
+    """Rows as left-aligned text columns under a header (numbers right-aligned)."""
+    cols = list(zip(header, *rows, strict=False)) if rows else [(h,) for h in header]
+    widths = [max(len(c) for c in col) for col in cols]
+    numeric = [
+        bool(rows) and all(r[i].replace(",", "").replace(".", "").isdigit() for r in rows) for i in range(len(header))
+    ]
+
+    def line(cells: list[str]) -> str:
+        out = [c.rjust(w) if num else c.ljust(w) for c, w, num in zip(cells, widths, numeric, strict=True)]
+        return (indent + "  ".join(out)).rstrip()
+
+    return [line(header)] + [line(r) for r in rows]
+
+
+def agent_lines(d: dict) -> list[str]:
+    """One agent's status (see `status_dict`) as text: a heading, its counters, one row per world."""
+    owns = f"; owns {', '.join(d['owns']) or 'no world'}" if "owns" in d else ""
+    out = [f"agent {d['agent']}: up {d['uptime']:.1f} s{owns}"]
+    counters = {k: v for k, v in sorted(d["counters"].items()) if v}
+    if counters:
+        out.append("  counters: " + ", ".join(f"{k} {v:,}" for k, v in counters.items()) + " (zeros not shown)")
+    else:
+        out.append("  counters: all 0")
+    rows = []
     for ln in d["links"]:
         err = ln["last_procrustes_error"]
-        print(
-            f"  world {ln['world']:<12} {ln['kind']:<10} {ln['state']:<8} program={ln['program']:<10} "
-            f"steps={ln['steps']:<8} episodes={ln['episodes']:<6} embedding v{ln['embedding_version']:<4} "
-            f"procrustes={'n/a' if err is None else f'{err:.4f}'} reward_mean={ln['reward_mean']:.4f} "
-            f"rejected={ln['rejected'] or '{}'} dropped={ln['dropped']}"
+        rejected = ", ".join(f"{k} {v}" for k, v in sorted(ln["rejected"].items()) if v) or "-"
+        rows.append(
+            [
+                ln["world"],
+                ln["kind"],
+                ln["program"],
+                ln["state"],
+                f"{ln['steps']:,}",
+                f"{ln['episodes']:,}",
+                f"v{ln['embedding_version']}" if ln["embedding_version"] else "-",
+                "-" if err is None else f"{err:.4f}",
+                f"{ln['reward_mean']:.4f}",
+                f"{ln['dropped']:,}",
+                rejected,
+            ]
         )
-    if not d["links"]:
-        print("  no worlds attached (start one with `sme world gridworld`)")
+    if rows:
+        out += table(
+            rows,
+            [
+                "world",
+                "kind",
+                "program",
+                "state",
+                "steps",
+                "episodes",
+                "embedding",
+                "procrustes",
+                "reward",
+                "dropped",
+                "rejected",
+            ],
+        )
+    else:
+        out.append("  no worlds attached (start one with `sme world gridworld`)")
+    return out
+
+
+def print_agent(d: dict) -> None:
+    """One agent's status as text (see `agent_lines`)."""
+    print("\n".join(agent_lines(d)))
 
 
 def main_args(args: argparse.Namespace) -> int:

@@ -46,6 +46,25 @@ class PerturbationError(ValueError):
     """A Control the world cannot apply; the message says why."""
 
 
+def check_perturbation(kind: str, perturbations: Mapping[str, type], control: Control) -> Any:
+    """`control.params` parsed with the declaration of its kind in `perturbations` (a world kind's
+    `World.Perturbations`), or a PerturbationError naming the parameter and every valid range.
+
+    The world calls it before it changes anything; `sme perturb` calls it too, with the declaration
+    of the running world's kind, so that it refuses at once what the world would refuse."""
+    cls = perturbations.get(control.kind)
+    if cls is None:
+        best = suggest(control.kind, perturbations)
+        hint = f" (did you mean {best!r}?)" if best else ""
+        valid = ", ".join(perturbations) or "(none)"
+        raise PerturbationError(f"{kind} has no perturbation {control.kind!r}{hint}; valid: {valid}")
+    name = f"{kind} {control.kind}"
+    try:
+        return parse(cls, dict(control.params), name=name)
+    except ParamError as e:
+        raise PerturbationError(f"{e}; {name} takes {param_ranges(cls)}") from None
+
+
 @dataclass(frozen=True)
 class NoParams:
     """The parameters of a world without parameters."""
@@ -202,17 +221,7 @@ class World(abc.ABC):
         the declared type (NaN and inf are not floats here) or out of range raises a
         PerturbationError naming the parameter and every valid range, and the world stays as it was.
         """
-        cls = self.Perturbations.get(control.kind)
-        if cls is None:
-            best = suggest(control.kind, self.Perturbations)
-            hint = f" (did you mean {best!r}?)" if best else ""
-            valid = ", ".join(self.Perturbations) or "(none)"
-            raise PerturbationError(f"{self.kind} has no perturbation {control.kind!r}{hint}; valid: {valid}")
-        name = f"{self.kind} {control.kind}"
-        try:
-            return parse(cls, dict(control.params), name=name)
-        except ParamError as e:
-            raise PerturbationError(f"{e}; {name} takes {param_ranges(cls)}") from None
+        return check_perturbation(self.kind, self.Perturbations, control)
 
     def perturb(self, control: Control) -> str:
         """Apply a perturbation; return a one-line description of what changed. Refuse a bad one

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import threading
 import time
+import weakref
 from typing import Any
 
 import gymnasium as gym
@@ -85,6 +86,7 @@ class BusEnv(gym.Env):
                 else BusConfig(mode="client", connect=(connect,), retry=True, credential="agent")
             )
         self.bus = Bus(bus, wait_limit=timeout)
+        _close_when_the_main_thread_ends(self)
         self._cv = threading.Condition()
         self._obs: Observation | None = None
         self._session = ""
@@ -181,6 +183,26 @@ class BusEnv(gym.Env):
         if not self._closed:
             self._closed = True
             self.bus.close()
+
+
+def _close_when_the_main_thread_ends(env: BusEnv) -> None:
+    """Close `env` when the main thread ends, so a script that forgets `env.close()` still exits.
+
+    A zenoh session with a callback subscriber keeps the interpreter from exiting until it is
+    closed, and `atexit` runs too late (after the interpreter waits on zenoh's threads);
+    `threading._register_atexit` runs first (concurrent.futures relies on it). A weak reference:
+    an env already collected is not kept alive for it."""
+    ref = weakref.ref(env)
+
+    def close() -> None:
+        e = ref()
+        if e is not None:
+            e.close()
+
+    try:
+        threading._register_atexit(close)  # type: ignore[attr-defined]
+    except (AttributeError, RuntimeError):  # no such hook here, or the interpreter is shutting down
+        pass
 
 
 __all__ = ["BusEnv"]

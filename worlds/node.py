@@ -236,6 +236,7 @@ class WorldNode:
                         what,
                         session=self.session,
                         timestamp=time.time(),
+                        control_id=ctl.id,
                     )
                 )
                 self._refresh_truth()
@@ -253,6 +254,7 @@ class WorldNode:
                         str(e),
                         session=self.session,
                         timestamp=time.time(),
+                        control_id=ctl.id,
                     )
                 )
 

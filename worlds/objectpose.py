@@ -27,13 +27,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 import pybullet as p
-from pybullet_utils.bullet_client import BulletClient
 from threadpoolctl import threadpool_limits
 
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import ParamError, option, parse
 from sensorimotor.worlds.base import StepResult, World
-from sensorimotor.worlds.bullet import disconnect
+from sensorimotor.worlds.bullet import direct_client, disconnect
 from sensorimotor.worlds.coplanar_spread import coplanar_spread
 
 STEP = math.pi / 16
@@ -152,7 +151,7 @@ class ObjectPoseWorld(World):
             self._goal = (int(prm.goal[0]), int(prm.goal[1]))
         self._frame: np.ndarray | None = None
         self._views: dict[tuple[int, int], np.ndarray] = {}
-        self._c = BulletClient(connection_mode=p.DIRECT)
+        self._c = direct_client()
         verts, idx, uvs, normals = _box_mesh()
         vis = self._c.createVisualShape(
             p.GEOM_MESH, vertices=verts, indices=idx, uvs=uvs, normals=normals, rgbaColor=[1, 1, 1, 1]

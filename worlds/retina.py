@@ -24,12 +24,11 @@ from typing import Any
 
 import numpy as np
 import pybullet as p
-from pybullet_utils.bullet_client import BulletClient
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import option, parse
 from sensorimotor.worlds.base import HealParams, StepResult, World
-from sensorimotor.worlds.bullet import disconnect
+from sensorimotor.worlds.bullet import direct_client, disconnect
 
 SCENES = ("spot", "spots", "texture")
 
@@ -146,7 +145,7 @@ class RetinaWorld(World):
         self.reversed = False
         self.noise_sd = 0.0
         self.lesion = np.zeros(self.n, dtype=bool)
-        self._client = BulletClient(connection_mode=p.DIRECT)
+        self._client = direct_client()
         self._spot_world: list[np.ndarray] = []
         self._build_scene(spot_px, n_spots)
         res = fields * supersample

@@ -21,12 +21,11 @@ from typing import Any, ClassVar
 import numpy as np
 import pybullet as p
 import pybullet_data
-from pybullet_utils.bullet_client import BulletClient
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import option, parse
 from sensorimotor.worlds.base import HealParams, StepResult, World
-from sensorimotor.worlds.bullet import disconnect
+from sensorimotor.worlds.bullet import direct_client, disconnect
 
 CONVERGE, DIVERGE = 0, 1
 
@@ -142,7 +141,7 @@ class VergenceWorld(World):
         self.k = 0  # vergence in steps
         self.goal = 0  # the step where d is minimal
         self.t = 0
-        self._c = BulletClient(connection_mode=p.DIRECT)
+        self._c = direct_client()
         self._build()
         self._proj = self._c.computeProjectionMatrixFOV(fovea_deg, 1.0, 0.05, 20.0)
         self._goal_cache: dict[int, int] = {}

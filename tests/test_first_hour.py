@@ -1,0 +1,125 @@
+"""The first hour of a new user (issue 24): honest summaries, pictures of the map, and commands that
+answer (the demo's length and flags, BusEnv exiting, replay without an agent, status as a table)."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sensorimotor.protocol.messages import AgentEvent, Embedding, Truth
+from sensorimotor.tools.summary import verdict
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _emb(version: int, err: float | None, n: int = 9, goal: float | None = None) -> Embedding:
+    metrics = {} if goal is None else {"goal_reached_fraction": goal}
+    return Embedding(
+        "a0", "w", version, "policy_iteration", tuple(range(n)), np.zeros((n, 2)), (2.0, 1.0), err, metrics=metrics
+    )
+
+
+def _text(v) -> str:
+    return "\n".join(v.lines)
+
+
+def test_the_summary_says_best_final_and_whether_the_map_held():
+    v = verdict([_emb(1, 0.8), _emb(2, 0.2), _emb(3, 0.011), _emb(4, 0.010), _emb(5, 0.012)])
+    assert (v.first, v.best, v.final, v.near_best) == (0.8, 0.010, 0.012, True)
+    t = _text(v)
+    assert "first 0.8000 (v1), best 0.0100 (v4), final 0.0120 (v5)" in t and "the map held" in t
+    assert "Procrustes error against truth 0.0120" in t  # the line scripts and tests read
+    assert "fell from 0.8000 (v1) to 0.0120" in t
+
+
+def test_a_map_that_did_not_hold_is_not_called_learned():
+    # CliffWalking as a new user saw it: best 0.0477, final 0.27
+    v = verdict([_emb(1, 0.88), _emb(2, 0.0477), _emb(3, 0.15), _emb(4, 0.27)])
+    t = _text(v)
+    assert v.near_best is False and "5.7x the best (v2): the map did not hold" in t
+    assert "fell" not in t
+
+
+def test_a_map_that_never_improved_says_so_and_why():
+    # MountainCar as a new user saw it: 0.6982 at v1, final 0.9388, the goal never reached
+    v = verdict([_emb(1, 0.6982, goal=0.0), _emb(2, 0.80, goal=0.0), _emb(3, 0.9388, goal=0.0)])
+    t = _text(v)
+    assert "fell" not in t and "not a map of the world" in t and "reached the goal from none" in t
+
+
+def test_a_world_that_cannot_be_embedded_is_told_why_not_to_run_longer():
+    ev = AgentEvent("a0", "bj", "policy_iteration", "world declares 0 start states", reason="no_start_states")
+    v = verdict([], [ev], n_starts=0)
+    t = _text(v)
+    assert not v.embedded and "declares 0 start states" in t and "never embedded" in t
+    assert "run longer" not in t
+    v = verdict([], [], n_starts=81, seconds=15)
+    assert "no embedding yet in 15 s" in _text(v) and "run longer" in _text(v)
+
+
+def test_a_world_without_truth_is_not_scored():
+    v = verdict([_emb(1, None), _emb(2, None)], has_truth=False)
+    t = _text(v)
+    assert v.embedded and v.best is None and "not scored" in t and "no ground truth" in t
+
+
+def test_plot_colours_the_map_by_truth_beside_its_spectrum(tmp_path):
+    from PIL import Image
+
+    from sensorimotor.tools.plot import plot_embedding
+
+    xy = np.array([(x, y) for y in range(5) for x in range(5)], dtype=float)
+    truth = Truth("w", "start_states", {"positions": xy})
+    rot = xy @ np.array([[0.0, -1.0], [1.0, 0.0]]) * 3 + 7  # the map, rotated, scaled and moved
+    emb = Embedding("a0", "w", 4, "policy_iteration", tuple(range(25)), rot, (9.0, 8.0, 0.1), 0.0)
+    drawn = plot_embedding(emb, truth, str(tmp_path))
+    assert drawn.n_points == 25 and drawn.coloured_by_truth
+    img = np.asarray(Image.open(drawn.path).convert("RGB"))
+    assert img.shape[0] > 200 and img.shape[1] > 600
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50  # colours, not a blank page
+    bare = plot_embedding(emb, None, str(tmp_path / "bare"))
+    assert not bare.coloured_by_truth and Path(bare.path).exists()
+
+
+def _sme(*args: str, timeout: float = 240.0) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+@pytest.mark.integration
+def test_demo_plot_writes_the_9x9_lattice_coloured_by_true_cell(endpoint, tmp_path):
+    """`sme demo --plot DIR` on the gridworld, with the Zenoh flags every command takes."""
+    from PIL import Image
+
+    out = _sme(
+        "demo", "--steps", "8000", "--seconds", "120", "-l", endpoint, "--no-multicast-scouting", "--plot",
+        str(tmp_path),
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    m = re.search(r"wrote (\S+): embedding v(\d+), (\d+) points, coloured by true position", out.stdout)
+    assert m, out.stdout
+    assert Path(m.group(1)) == tmp_path / "gridworld.png" and int(m.group(3)) == 81
+    img = np.asarray(Image.open(m.group(1)).convert("RGB"))
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 81
+    assert "argv[0]" not in out.stdout
+
+
+@pytest.mark.integration
+def test_demo_retina_at_its_default_length_shows_an_embedding(endpoint):
+    """The retina's first embedding comes after 1,000 saccades, past the default 15 s on a slow
+    machine: an unbounded demo waits for it; PyBullet's start-up line stays off stdout."""
+    out = _sme("demo", "--world", "retina", "--listen", endpoint, timeout=300)
+    assert out.returncode == 0, (out.stdout[-2000:], out.stderr[-2000:])
+    assert re.search(r"\[retina\] embedding v1 ", out.stdout), out.stdout[-2000:]
+    assert "final embedding v" in out.stdout
+    assert "argv[0]" not in out.stdout and "pybullet build time" not in out.stdout
