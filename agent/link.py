@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.detectors import DropDetector
-from sensorimotor.agent.evaluation import evaluate_embedding
+from sensorimotor.agent.evaluation import embedding_scores, evaluate_embedding
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.protocol import codec
 from sensorimotor.protocol.bus import Inbox
@@ -343,6 +343,7 @@ class WorldLink:
         if isinstance(item, EmbeddingOutput):
             scores = evaluate_embedding(item, self.truth)
             err = scores.pop("procrustes_error", None)
+            field = embedding_scores(item, self.truth) if err is not None else None
             self.version += 1
             self.counters.embeddings += 1
             if err is not None:
@@ -362,6 +363,7 @@ class WorldLink:
                 item.iteration,
                 item.drop_step,
                 item.labels,
+                field,
             )
             log.info(
                 "world %s: embedding v%d (%s) n=%d error=%s",

@@ -213,6 +213,14 @@ def _enc_emb(x: m.Embedding) -> pb.Embedding:
     )
     if x.drop_step is not None:
         p.drop_step = x.drop_step
+    if x.scores is not None:
+        sc = x.scores
+        p.scores.trustworthiness = float(sc.trustworthiness)
+        p.scores.continuity = float(sc.continuity)
+        p.scores.metric_dissimilarity = float(sc.metric_dissimilarity)
+        p.scores.topological_dissimilarity = float(sc.topological_dissimilarity)
+        p.scores.n_neighbors = int(sc.n_neighbors)
+        p.scores.n_points = int(sc.n_points)
     _tensor_to_pb("coordinates", np.asarray(x.coordinates, dtype=np.float64), p.coordinates)
     p.metrics.update({k: float(v) for k, v in x.metrics.items()})
     return p
@@ -393,7 +401,15 @@ def _dec_emb(p: pb.Embedding) -> m.Embedding:
         iteration=p.iteration,
         drop_step=p.drop_step if p.HasField("drop_step") else None,
         labels=tuple(p.labels),
+        scores=_dec_scores(p.scores) if p.HasField("scores") else None,
     )
+
+
+def _dec_scores(s: pb.Embedding.Scores) -> m.EmbeddingScores:
+    values = (s.trustworthiness, s.continuity, s.metric_dissimilarity, s.topological_dissimilarity)
+    if not all(math.isfinite(v) for v in values):
+        raise errors.NonFiniteValue("Embedding: a score is NaN or inf")
+    return m.EmbeddingScores(*values, n_neighbors=s.n_neighbors, n_points=s.n_points)
 
 
 def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:

@@ -321,6 +321,8 @@ class Embedding:
         The step at which a reward drop was detected (trigger ``relearned``).
     labels : tuple of int
         Cluster of each row (trigger ``policy_map``); empty otherwise.
+    scores : EmbeddingScores or None
+        Trustworthiness, continuity and the two dissimilarities against truth (None without truth).
     """
 
     agent_id: str
@@ -337,6 +339,33 @@ class Embedding:
     iteration: int = 0
     drop_step: int | None = None
     labels: tuple[int, ...] = ()
+    scores: EmbeddingScores | None = None
+
+
+@dataclass(frozen=True)
+class EmbeddingScores:
+    """The field's scores of an embedding against ground truth (wire: `Embedding.scores`).
+
+    Attributes
+    ----------
+    trustworthiness, continuity : float
+        In [0, 1] (``sklearn.manifold.trustworthiness``; continuity swaps the spaces), over
+        `n_neighbors` nearest neighbours.
+    metric_dissimilarity, topological_dissimilarity : float
+        Laflaquière et al. 2019: pairwise-distance dissimilarity after an affine fit of the truth,
+        unweighted and weighted toward near pairs; 0 = an affine image of the truth.
+    n_neighbors : int
+        The k of trustworthiness and continuity.
+    n_points : int
+        Rows scored: fewer than the embedding's when it was subsampled (a fixed subset).
+    """
+
+    trustworthiness: float
+    continuity: float
+    metric_dissimilarity: float
+    topological_dissimilarity: float
+    n_neighbors: int
+    n_points: int
 
 
 @dataclass(frozen=True)

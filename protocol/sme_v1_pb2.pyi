@@ -169,7 +169,7 @@ class Truth(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., tensors: _Optional[_Iterable[_Union[Tensor, _Mapping]]] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ...) -> None: ...
 
 class Embedding(_message.Message):
-    __slots__ = ("schema_version", "agent_id", "world_id", "version", "trigger", "ids", "coordinates", "eigenvalues", "has_procrustes", "procrustes_error", "step", "timestamp", "metrics", "iteration", "drop_step", "labels")
+    __slots__ = ("schema_version", "agent_id", "world_id", "version", "trigger", "ids", "coordinates", "eigenvalues", "has_procrustes", "procrustes_error", "step", "timestamp", "metrics", "iteration", "drop_step", "labels", "scores")
     class MetricsEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -177,6 +177,21 @@ class Embedding(_message.Message):
         key: str
         value: float
         def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    class Scores(_message.Message):
+        __slots__ = ("trustworthiness", "continuity", "metric_dissimilarity", "topological_dissimilarity", "n_neighbors", "n_points")
+        TRUSTWORTHINESS_FIELD_NUMBER: _ClassVar[int]
+        CONTINUITY_FIELD_NUMBER: _ClassVar[int]
+        METRIC_DISSIMILARITY_FIELD_NUMBER: _ClassVar[int]
+        TOPOLOGICAL_DISSIMILARITY_FIELD_NUMBER: _ClassVar[int]
+        N_NEIGHBORS_FIELD_NUMBER: _ClassVar[int]
+        N_POINTS_FIELD_NUMBER: _ClassVar[int]
+        trustworthiness: float
+        continuity: float
+        metric_dissimilarity: float
+        topological_dissimilarity: float
+        n_neighbors: int
+        n_points: int
+        def __init__(self, trustworthiness: _Optional[float] = ..., continuity: _Optional[float] = ..., metric_dissimilarity: _Optional[float] = ..., topological_dissimilarity: _Optional[float] = ..., n_neighbors: _Optional[int] = ..., n_points: _Optional[int] = ...) -> None: ...
     SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
     AGENT_ID_FIELD_NUMBER: _ClassVar[int]
     WORLD_ID_FIELD_NUMBER: _ClassVar[int]
@@ -193,6 +208,7 @@ class Embedding(_message.Message):
     ITERATION_FIELD_NUMBER: _ClassVar[int]
     DROP_STEP_FIELD_NUMBER: _ClassVar[int]
     LABELS_FIELD_NUMBER: _ClassVar[int]
+    SCORES_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     agent_id: str
     world_id: str
@@ -209,7 +225,8 @@ class Embedding(_message.Message):
     iteration: int
     drop_step: int
     labels: _containers.RepeatedScalarFieldContainer[int]
-    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., version: _Optional[int] = ..., trigger: _Optional[str] = ..., ids: _Optional[_Iterable[int]] = ..., coordinates: _Optional[_Union[Tensor, _Mapping]] = ..., eigenvalues: _Optional[_Iterable[float]] = ..., has_procrustes: _Optional[bool] = ..., procrustes_error: _Optional[float] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., metrics: _Optional[_Mapping[str, float]] = ..., iteration: _Optional[int] = ..., drop_step: _Optional[int] = ..., labels: _Optional[_Iterable[int]] = ...) -> None: ...
+    scores: Embedding.Scores
+    def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., version: _Optional[int] = ..., trigger: _Optional[str] = ..., ids: _Optional[_Iterable[int]] = ..., coordinates: _Optional[_Union[Tensor, _Mapping]] = ..., eigenvalues: _Optional[_Iterable[float]] = ..., has_procrustes: _Optional[bool] = ..., procrustes_error: _Optional[float] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., metrics: _Optional[_Mapping[str, float]] = ..., iteration: _Optional[int] = ..., drop_step: _Optional[int] = ..., labels: _Optional[_Iterable[int]] = ..., scores: _Optional[_Union[Embedding.Scores, _Mapping]] = ...) -> None: ...
 
 class AttachConfig(_message.Message):
     __slots__ = ("seed", "detector", "program", "program_params")

@@ -13,6 +13,7 @@ from sensorimotor.protocol.messages import (
     AttachConfig,
     Control,
     Embedding,
+    EmbeddingScores,
     LinkStatus,
     Observation,
     SensorSpec,
@@ -98,6 +99,17 @@ def test_observation_round_trip_keeps_values_dtypes_and_shapes():
         ),
         Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 0),
         Embedding("a0", "w", 4, "relearned", (0, 1), np.zeros((2, 1)), (1.0,), 0.5, 10, 1.0, {}, 7, 123456789),
+        Embedding(
+            "a0",
+            "w",
+            5,
+            "policy_iteration",
+            (0, 1, 2),
+            np.eye(3)[:, :2],
+            (1.0,),
+            0.1,
+            scores=EmbeddingScores(0.875, 0.9375, 0.125, 0.0625, 1, 3),
+        ),
         WorldEvent("w", "action_refused", "bad_action", "step 3: out of range", 3, "s1", 2.0),
         AgentStatus(
             "a0",
@@ -217,3 +229,16 @@ def test_generated_code_matches_schema_file():
         assert f"message {m.name} {{" in src
         for f in m.field:
             assert f" {f.name} = {f.number};" in src, (m.name, f.name)
+
+
+def test_embedding_scores_are_additive_and_non_finite_scores_are_refused():
+    plain = Embedding("a0", "w", 1, "t", (0, 1), np.zeros((2, 2)), (1.0,), None)
+    assert codec.decode(Embedding, codec.encode(plain)).scores is None  # an old writer: no scores
+    scored = Embedding(
+        "a0", "w", 1, "t", (0, 1), np.zeros((2, 2)), (1.0,), 0.0, scores=EmbeddingScores(1, 1, 0, 0, 5, 2)
+    )
+    p = pb.Embedding.FromString(codec.encode(scored))
+    assert p.HasField("scores") and p.scores.n_neighbors == 5
+    p.scores.continuity = math.nan
+    with pytest.raises(errors.NonFiniteValue, match="score"):
+        codec.decode(Embedding, p.SerializeToString())

@@ -39,6 +39,7 @@ from sensorimotor.protocol.messages import (
     AttachConfig,
     Control,
     Embedding,
+    EmbeddingScores,
     LinkStatus,
     Observation,
     SensorSpec,
@@ -156,6 +157,7 @@ embeddings = st.builds(
     st.dictionaries(text, finite, max_size=3),
     u32,
     st.none() | u64,
+    scores=st.none() | st.builds(EmbeddingScores, finite, finite, finite, finite, u32, u32),
 )
 attach_configs = st.builds(AttachConfig, i64, text, text, str_map)
 agent_events = st.builds(
@@ -324,6 +326,9 @@ def hostile_messages(draw: st.DrawFn, cls: type) -> bytes:
         draw(hostile_tensor(p.coordinates))
         p.eigenvalues.extend(draw(st.lists(hostile_float, max_size=4)))
         p.has_procrustes = draw(st.booleans())
+        if draw(st.booleans()):
+            p.scores.trustworthiness = draw(hostile_float)
+            p.scores.topological_dissimilarity = draw(hostile_float)
     if cls is WorldSpec:
         for _ in range(draw(st.integers(0, 2))):
             s = p.sensors.add(

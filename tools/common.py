@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import json
 import logging
@@ -159,6 +160,7 @@ def embedding_dict(e: Embedding, coordinates: bool = False) -> dict[str, Any]:
         "metrics": {k: _num(v) for k, v in e.metrics.items()},
         "iteration": e.iteration,
         "drop_step": e.drop_step,
+        "scores": None if e.scores is None else dataclasses.asdict(e.scores),
     }
     if coordinates:
         d["ids"] = list(e.ids)
@@ -227,9 +229,16 @@ def format_embedding(e: Embedding) -> str:
     """An Embedding as one line for people."""
     err = "n/a" if e.procrustes_error is None else f"{e.procrustes_error:.4f}"
     eig = " ".join(f"{v:.3g}" for v in e.eigenvalues[:4])
+    sc = e.scores
+    field = (
+        ""
+        if sc is None
+        else f"T={sc.trustworthiness:.3f} C={sc.continuity:.3f} "
+        f"Dm={sc.metric_dissimilarity:.3f} Dt={sc.topological_dissimilarity:.4f} "
+    )
     return (
         f"[{e.world_id}] embedding v{e.version:<3} {describe_trigger(e):<22} n={e.coordinates.shape[0]:<4} "
-        f"procrustes={err:<7} eig=[{eig}] step={e.step}"
+        f"procrustes={err:<7} {field}eig=[{eig}] step={e.step}"
     )
 
 

@@ -29,6 +29,8 @@ import numpy as np
 
 from sensorimotor.protocol.messages import Trigger
 from sensorimotor.tools.common import require
+from sensorimotor.tools.experiments import scoring
+from sensorimotor.tools.experiments.scoring import scores_of
 
 
 def _mean_se(x: list[float] | np.ndarray) -> tuple[float, float]:
@@ -52,6 +54,7 @@ class _GridRow(TypedDict):
     first: tuple[float, float]
     final: tuple[float, float]
     runs: int
+    field: dict[str, tuple[float, float]]
 
 
 # --- jobs (top-level functions: picklable for worker processes) ----------------------------------
@@ -65,7 +68,13 @@ def job_grid(seed: int, barrier: bool, steps: int, policy: str = "lspi") -> dict
     w = GridWorld(seed=seed, barrier=barrier)
     p = GridworldProgram(w.spec(), seed=seed, policy=policy, samples_per_iteration=400 if policy == "lspi" else 50)
     run = run_inprocess(w, p, steps)
-    return {"seed": seed, "barrier": barrier, "policy": policy, "errors": [_known(e) for e in run.errors]}
+    return {
+        "seed": seed,
+        "barrier": barrier,
+        "policy": policy,
+        "errors": [_known(e) for e in run.errors],
+        "scores": [scores_of(e) for e in run.embeddings],
+    }
 
 
 def job_learning(seed: int, steps: int, every: int, supersample: int) -> dict:
@@ -115,6 +124,7 @@ def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
             "version": e.version,
             "trigger": e.trigger,
             "procrustes_error": e.procrustes_error,
+            "scores": scores_of(e),
             "step": e.step,
             "n_points": int(e.coordinates.shape[0]),
         }
@@ -160,6 +170,7 @@ def job_vergence(seed: int, world: str, iterations: int) -> dict:
         "seed": seed,
         "world": world,
         "errors": [e.procrustes_error for e in embs],
+        "scores": [scores_of(e) for e in embs],
         "success": [e.metrics["policy_success"] for e in embs],
         "first_perfect_iteration": first_perfect,
         "goal_minus_truth": (np.array(goals) - truth).tolist()
@@ -225,6 +236,7 @@ def gridworld(runs: int, quick: bool, workers: int, out: str) -> dict:
     ]
     res = _pool_map(job_grid, jobs, workers)
     table: list[_GridRow] = []
+    cells: dict[str, str] = {}
     for name, sel in (
         ("plain", lambda r: not r["barrier"] and r["policy"] == "lspi"),
         ("barrier", lambda r: r["barrier"]),
@@ -233,9 +245,28 @@ def gridworld(runs: int, quick: bool, workers: int, out: str) -> dict:
         rs = [r for r in res if sel(r)]
         final = [r["errors"][-1] for r in rs]
         first = [r["errors"][0] for r in rs]
-        table.append({"case": name, "first": _mean_se(first), "final": _mean_se(final), "runs": len(rs)})
-    lines = ["| case | Procrustes error, first embedding | final | runs |", "|---|---|---|---|"]
-    lines += [f"| {t['case']} | {_fmt(t['first'], 4)} | {_fmt(t['final'], 4)} | {t['runs']} |" for t in table]
+        last = [r["scores"][-1] for r in rs]
+        table.append(
+            {
+                "case": name,
+                "first": _mean_se(first),
+                "final": _mean_se(final),
+                "runs": len(rs),
+                "field": scoring.summary(last),
+            }
+        )
+        cells[name] = scoring.cell(last)
+    lines = [
+        f"Gridworld (ch. 5): Procrustes error mean ± standard error; {scoring.HEADER} of the final embedding "
+        "mean ± 95 % CI.",
+        "",
+        f"| case | Procrustes error, first embedding | final | {scoring.HEADER}, final | runs |",
+        "|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {t['case']} | {_fmt(t['first'], 4)} | {_fmt(t['final'], 4)} | {cells[t['case']]} | {t['runs']} |"
+        for t in table
+    ]
     _plot(
         out,
         "gridworld_lspi.png",
@@ -293,6 +324,9 @@ def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2)
     delays = [r["detection_delay"] for r in reversal]
     relearn = [r["relearn_episodes"] for r in reversal]
     relearned = [any(e["trigger"] == Trigger.RELEARNED for e in r["embeddings"]) for r in reversal]
+    finals = [r["embeddings"][-1] for r in reversal if r["embeddings"]]
+    last_err = [float(e["procrustes_error"]) for e in finals if e["procrustes_error"] is not None]
+    last_scores = [e["scores"] for e in finals]
     lines = [
         f"Retina (ch. 4): {runs} seeded runs; mean ± standard error.",
         "",
@@ -307,6 +341,8 @@ def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2)
         f"| reversal at {rev['at']}: detection delay (saccades), per run | {delays} | about 1000 |",
         f"| reversal: saccades to 90 % of pre-reversal reward, per run | {relearn} | |",
         f"| reversal: a 'relearned' embedding was published, per run | {relearned} | |",
+        f"| reversal: last embedding's Procrustes error | {_fmt(_mean_se(last_err), 4)} | |",
+        f"| reversal: last embedding's {scoring.HEADER} (95 % CI) | {scoring.cell(last_scores)} | |",
     ]
     xs = learning[0]["steps"]
     _plot(
@@ -386,9 +422,12 @@ def vergence(runs: int, quick: bool, workers: int, out: str) -> dict:
     iters = 5 if quick else 12
     res = _pool_map(job_vergence, [(s, w, iters) for w in ("vergence", "stereo") for s in range(runs)], workers)
     lines = [
+        f"Vergence (ch. 7): {runs} seeded runs; Procrustes error mean ± standard error, {scoring.HEADER} "
+        "mean ± 95 % CI, both of the last embedding.",
+        "",
         "| world | first perfect LSPI iteration (per run) | Procrustes error of the last embedding | "
-        "matching minimum vs truth | dissertation |",
-        "|---|---|---|---|---|",
+        f"{scoring.HEADER} | matching minimum vs truth | dissertation |",
+        "|---|---|---|---|---|---|",
     ]
     for w, ref in (
         ("vergence", "perfect in 9 iterations; Procrustes 0.0257"),
@@ -400,7 +439,7 @@ def vergence(runs: int, quick: bool, workers: int, out: str) -> dict:
         match = f"{(diff <= 2).mean() * 100:.0f} % within 2 {unit}, max {diff.max():.1f}"
         lines.append(
             f"| {w} | {[r['first_perfect_iteration'] for r in rs]} | {_fmt(_mean_se([r['errors'][-1] for r in rs]), 4)} "
-            f"| {match} | {ref} |"
+            f"| {scoring.cell([r['scores'][-1] for r in rs])} | {match} | {ref} |"
         )
     _plot(
         out,
@@ -456,6 +495,20 @@ def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
     ):
         ref = {"true": "ideal", "random": "benchmark"}.get(k, "comparable to true state")
         lines.append(f"| {label} | {_fmt(ci[k], 1)} | {ci[k][0] / t:.2f}x | {ref} |")
+    lines += [
+        "",
+        "The vergence embedding each body's program drives on (its last one; Procrustes mean ± standard error, "
+        f"{scoring.HEADER} mean ± 95 % CI):",
+        "",
+        f"| body | Procrustes error | {scoring.HEADER} |",
+        "|---|---|---|",
+    ]
+    for k in ("baseline-1.0", "baseline-1.4", "vertical"):
+        lastemb = [r["embeddings"][-1] for r in res if r["kind"] == k and r["embeddings"]]
+        errs = [float(e["procrustes_error"]) for e in lastemb if e.get("procrustes_error") is not None]
+        lines.append(
+            f"| {k} | {_fmt(_mean_se(errs), 4) if errs else 'n/a'} | {scoring.cell([e.get('scores') for e in lastemb])} |"
+        )
     pairs = [("baseline-1.0", "baseline-1.4"), ("baseline-1.0", "vertical"), ("baseline-1.4", "vertical")]
     tests = {
         f"{a} vs {b}": float(stats.ttest_ind(finals[a], finals[b], equal_var=False).pvalue)

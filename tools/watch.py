@@ -38,7 +38,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--json",
         action="store_true",
         help="one JSON object per line: embeddings carry world, version, trigger, n_points, dims, "
-        "eigenvalues, procrustes_error, step, metrics; events carry kind and detail",
+        "eigenvalues, procrustes_error, scores (trustworthiness, continuity, metric and topological "
+        "dissimilarity, n_neighbors, n_points; null without truth), step, metrics; events carry kind and detail",
     )
     p.add_argument("--coords", action="store_true", help="include ids and coordinates in --json output")
     p.add_argument("--count", type=int, default=None, metavar="N", help="exit after N embeddings")

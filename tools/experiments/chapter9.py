@@ -4,7 +4,7 @@ slippery gridworld, option discovery, policy maps of the mountain car, and two v
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -16,6 +16,8 @@ from sensorimotor.agent.embedding.probabilistic import (
     sample_until_settled,
 )
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
+from sensorimotor.tools.experiments import scoring
+from sensorimotor.tools.experiments.scoring import score_points
 from sensorimotor.worlds.gridworld import GridWorld
 
 # --- probabilistic sensorimotor embedding (9.4) --------------------------------------------------
@@ -63,6 +65,7 @@ class ProbabilisticResult:
     mean_debiased: float
     samples_mode: int
     samples_mean: int
+    field_scores: dict[str, dict[str, float] | None] = field(default_factory=dict)  # estimator -> scoring.score_points
 
 
 def probabilistic_gridworld(
@@ -75,11 +78,15 @@ def probabilistic_gridworld(
     truth = world.truth().tensors["positions"]
     n = len(world.cells)
 
-    def err(D: np.ndarray) -> float:
-        return procrustes_error(truth, classical_mds(D, 2).coordinates)
+    fields: dict[str, dict[str, float] | None] = {}
+
+    def err(D: np.ndarray, name: str) -> float:
+        X = classical_mds(D, 2).coordinates
+        fields[name] = score_points(truth, X)
+        return procrustes_error(truth, X)
 
     plain = [greedy_trace(world, lspi, i) for i in range(n)]
-    e_plain = err(trace_distances(plain, kind="edit", substitution_cost=2))
+    e_plain = err(trace_distances(plain, kind="edit", substitution_cost=2), "plain")
     mode = sample_until_settled(
         lambda i: greedy_trace(world, lspi, i), n, mode_distances, tol=tol, max_samples=max_samples
     )
@@ -90,11 +97,12 @@ def probabilistic_gridworld(
         seed,
         slip,
         e_plain,
-        err(mode.distances),
-        err(mean.distances),
-        err(mean_pair_distances(mean.samples, debias=True)),
+        err(mode.distances, "mode"),
+        err(mean.distances, "mean"),
+        err(mean_pair_distances(mean.samples, debias=True), "mean_debiased"),
         mode.n_samples,
         mean.n_samples,
+        fields,
     )
 
 
@@ -333,11 +341,14 @@ def isomap_job(seed: int, barrier: bool) -> dict:
     traces = [greedy_trace(world, lspi, i) for i in range(len(world.cells))]
     D = trace_distances(traces, kind="edit", substitution_cost=2)
     truth = world.truth().tensors["positions"]
+    mds, iso = classical_mds(D, 2).coordinates, isomap_coordinates(D)
     return {
         "seed": seed,
         "barrier": barrier,
-        "mds": procrustes_error(truth, classical_mds(D, 2).coordinates),
-        "isomap": procrustes_error(truth, isomap_coordinates(D)),
+        "mds": procrustes_error(truth, mds),
+        "isomap": procrustes_error(truth, iso),
+        "mds_scores": score_points(truth, mds),
+        "isomap_scores": score_points(truth, iso),
     }
 
 
@@ -389,7 +400,11 @@ def state_aided_job(n_starts: int = 20) -> dict:
     }
     for name, D in (("plain", D_plain), ("state_aided", D_aided)):
         X = classical_mds(D, 1).coordinates
-        out[name] = {"procrustes": procrustes_error(truth, X), "far_error_rad": far_error(truth, X, far)}
+        out[name] = {
+            "procrustes": procrustes_error(truth, X),
+            "far_error_rad": far_error(truth, X, far),
+            "scores": score_points(truth, X),
+        }
     return out
 
 
@@ -463,18 +478,26 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
     samples = {k: _ci95([r[k] for r in prob]) for k in ("samples_mode", "samples_mean")}
     iso_ci = {(b, k): _ci95([r[k] for r in iso if r["barrier"] == b]) for b in (False, True) for k in ("mds", "isomap")}
 
+    def pcell(name: str) -> str:
+        return scoring.cell([r["field_scores"].get(name) for r in prob])
+
+    def icell(barrier: bool, key: str) -> str:
+        return scoring.cell([r[f"{key}_scores"] for r in iso if r["barrier"] == barrier])
+
     L = [
         f"Chapter 9 (beyond the dissertation): {runs} seeded runs per condition{' (quick)' if quick else ''}; "
         "mean ± 95 % CI (t) over seeds.",
         "",
         f"### Probabilistic sensorimotor embedding (9.4): gridworld {slip_size}x{slip_size}, slip 0.2",
         "",
-        "| estimator | Procrustes error | samples per start (chosen) |",
-        "|---|---|---|",
-        f"| plain (one sampled trace per start) | {_fmt(prob_ci['plain'], 4)} | 1 |",
-        f"| mode of sampled traces | {_fmt(prob_ci['mode'], 4)} | {_fmt(samples['samples_mode'], 1)} |",
-        f"| mean distance over sampled pairs | {_fmt(prob_ci['mean'], 4)} | {_fmt(samples['samples_mean'], 1)} |",
-        f"| mean distance, spread removed | {_fmt(prob_ci['mean_debiased'], 4)} | same samples |",
+        f"| estimator | Procrustes error | {scoring.HEADER} | samples per start (chosen) |",
+        "|---|---|---|---|",
+        f"| plain (one sampled trace per start) | {_fmt(prob_ci['plain'], 4)} | {pcell('plain')} | 1 |",
+        f"| mode of sampled traces | {_fmt(prob_ci['mode'], 4)} | {pcell('mode')} | {_fmt(samples['samples_mode'], 1)} |",
+        f"| mean distance over sampled pairs | {_fmt(prob_ci['mean'], 4)} | {pcell('mean')} "
+        f"| {_fmt(samples['samples_mean'], 1)} |",
+        f"| mean distance, spread removed | {_fmt(prob_ci['mean_debiased'], 4)} | {pcell('mean_debiased')} "
+        "| same samples |",
         "",
         f"### Option discovery (9.6, Fig 9.3): {opt_size}x{opt_size} gridworld, goal in the far corner",
         "",
@@ -507,20 +530,24 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
         "",
         "### Variations (9.5)",
         "",
-        "| gridworld | Procrustes, classical MDS | Procrustes, Isomap (8 neighbours) |",
-        "|---|---|---|",
-        f"| plain | {_fmt(iso_ci[(False, 'mds')], 4)} | {_fmt(iso_ci[(False, 'isomap')], 4)} |",
-        f"| barrier | {_fmt(iso_ci[(True, 'mds')], 4)} | {_fmt(iso_ci[(True, 'isomap')], 4)} |",
+        f"| gridworld | Procrustes, classical MDS | {scoring.HEADER}, MDS | Procrustes, Isomap (8 neighbours) "
+        f"| {scoring.HEADER}, Isomap |",
+        "|---|---|---|---|---|",
+        f"| plain | {_fmt(iso_ci[(False, 'mds')], 4)} | {icell(False, 'mds')} | {_fmt(iso_ci[(False, 'isomap')], 4)} "
+        f"| {icell(False, 'isomap')} |",
+        f"| barrier | {_fmt(iso_ci[(True, 'mds')], 4)} | {icell(True, 'mds')} | {_fmt(iso_ci[(True, 'isomap')], 4)} "
+        f"| {icell(True, 'isomap')} |",
         "",
         "| vergence starts | far starts sharing a goal step | far-half error, plain (rad) | state-aided (rad) | "
-        "Procrustes plain | state-aided |",
-        "|---|---|---|---|---|---|",
+        f"Procrustes plain | state-aided | {scoring.HEADER}, plain | state-aided |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for v in verg:
         L.append(
             f"| {v['n_starts']} | {v['aliased_far_starts']} | {v['plain']['far_error_rad']:.5f} | "
             f"{v['state_aided']['far_error_rad']:.5f} | {v['plain']['procrustes']:.4f} | "
-            f"{v['state_aided']['procrustes']:.4f} |"
+            f"{v['state_aided']['procrustes']:.4f} | {scoring.cell([v['plain']['scores']])} | "
+            f"{scoring.cell([v['state_aided']['scores']])} |"
         )
 
     # figures

@@ -41,6 +41,7 @@ def visual(
     from sensorimotor.agent.detectors import make_detector
     from sensorimotor.agent.programs.mountaincar import MountainCarProgram
     from sensorimotor.protocol.messages import Control, Embedding
+    from sensorimotor.tools.experiments.scoring import scores_of
     from sensorimotor.tools.inprocess import run_inprocess
     from sensorimotor.worlds.mountaincar import MountainCarWorld
 
@@ -57,6 +58,7 @@ def visual(
                     "trigger": msg.trigger,
                     "training_steps": prog.training_steps,
                     "procrustes_error": msg.procrustes_error,
+                    "scores": scores_of(msg),
                 }
             )
         elif getattr(msg, "kind", None) == "drop_detected":

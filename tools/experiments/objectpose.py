@@ -27,6 +27,8 @@ import numpy as np
 from sensorimotor.agent.embedding import classical_mds, procrustes_error
 from sensorimotor.agent.learners.lspi import LSPI
 from sensorimotor.agent.programs.generic import GenericProgram
+from sensorimotor.tools.experiments import scoring
+from sensorimotor.tools.experiments.scoring import score_points, scores_of
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.objectpose import ObjectPoseWorld
 
@@ -40,6 +42,7 @@ class EmbeddingRun:
     goal_reached: list[float]
     coordinates: np.ndarray  # the last embedding, one row per start state
     eigenvalues: list[float]  # of the last embedding (classical MDS)
+    scores: dict[str, float] | None  # trustworthiness, continuity, dissimilarities of the last embedding
     world_steps: int
     seconds: float
 
@@ -59,6 +62,7 @@ def embed(world: ObjectPoseWorld, seed: int, embeddings: int, steps: int, **prog
         [float(e.metrics["goal_reached_fraction"]) for e in embs],
         np.asarray(embs[-1].coordinates, dtype=np.float64),
         [float(v) for v in embs[-1].eigenvalues],
+        scores_of(embs[-1]),
         run.steps,
         time.perf_counter() - t0,
     )
@@ -241,6 +245,9 @@ def job(seed: int, half_range: int, embeddings: int, steps: int, align_iteration
         "coordinates": run.coordinates.tolist(),
         "world_steps": run.world_steps,
         "seconds": run.seconds,
+        "scores": run.scores,
+        "pca_scores": score_points(truth, pe.pca_coordinates),
+        "isomap_scores": score_points(truth, pe.isomap_coordinates),
         "pca_error": pe.pca_error,
         "isomap_error": pe.isomap_error,
         "isomap_neighbours": pe.isomap_neighbours,
@@ -366,12 +373,14 @@ def chapter(runs: int, quick: bool, workers: int, out: str) -> dict[str, Any]:
         f"Object pose (ch. 6): {runs} seeded runs; {n} start poses (pitch x yaw, ±{half_range} steps of π/16); "
         "Procrustes error against (pitch, yaw), mean ± 95 % CI over seeds.",
         "",
-        "| method | Procrustes error | dissertation |",
-        "|---|---|---|",
-        f"| sensorimotor embedding (generic program), first embedding | {f(first)} | higher at first |",
-        f"| sensorimotor embedding, after {embeddings} embeddings | {f(se)} | far lower than PCA and Isomap |",
-        f"| PCA of the start images | {f(pca)} | poor |",
-        f"| Isomap of the start images (best of 4, 6, 8, 12 neighbours) | {f(iso)} | poor |",
+        f"| method | Procrustes error | {scoring.HEADER} | dissertation |",
+        "|---|---|---|---|",
+        f"| sensorimotor embedding (generic program), first embedding | {f(first)} | | higher at first |",
+        f"| sensorimotor embedding, after {embeddings} embeddings | {f(se)} | {scoring.cell([r['scores'] for r in res])} "
+        "| far lower than PCA and Isomap |",
+        f"| PCA of the start images | {f(pca)} | {scoring.cell([r['pca_scores'] for r in res])} | poor |",
+        f"| Isomap of the start images (best of 4, 6, 8, 12 neighbours) | {f(iso)} "
+        f"| {scoring.cell([r['isomap_scores'] for r in res])} | poor |",
         "",
         f"Sensorimotor embedding / better peer: {se[0] / best_peer:.3f} (goal ≤ 1/3). "
         f"Goal pose found per seed (pitch, yaw steps): {[tuple(r['goal']) for r in res]}.",

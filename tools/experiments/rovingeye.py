@@ -18,6 +18,8 @@ from scipy.spatial.distance import cdist
 
 from sensorimotor.agent.embedding import classical_mds, procrustes, trace_distances
 from sensorimotor.agent.learners.saccade import SaccadeLearner
+from sensorimotor.tools.experiments import scoring
+from sensorimotor.tools.experiments.scoring import score_points
 from sensorimotor.worlds.perceptual_goals import IntensitySurface, directions, gradient_step, reward, score
 from sensorimotor.worlds.roving_eye import eye_bounds, eye_view, image_goals, load_image
 
@@ -84,6 +86,7 @@ class MethodResult:
     eigenvalues: np.ndarray  # descending, the first ten
     coordinates: np.ndarray  # [n, 2] aligned onto the standardised truth
     mean_actions: float | None
+    field: dict[str, float] | None = None  # trustworthiness, continuity, dissimilarities (tools.experiments.scoring)
 
 
 def setup(cfg: Config, seed: int) -> Setup:
@@ -238,6 +241,7 @@ def embed(
         np.asarray(res.eigenvalues[:10], dtype=np.float64),
         pr.aligned,
         None if count is None else float(np.mean(count)),
+        score_points(truth, res.coordinates),
     )
 
 
@@ -282,6 +286,7 @@ def job(seed: int, quick: bool) -> dict:
     out: dict = {
         "seed": seed,
         "errors": {m: r.error for m, r in res.items()},
+        "field_scores": {m: r.field for m, r in res.items()},
         "scores": {m: r.score for m, r in res.items() if r.score is not None},
         "mean_actions": {m: r.mean_actions for m, r in res.items() if r.mean_actions is not None},
         "eigenvalues": {m: r.eigenvalues.tolist() for m, r in res.items()},
@@ -373,6 +378,12 @@ def chapter(runs: int, quick: bool, workers: int, out: str) -> dict:
         "| mean actions per trace | NA | "
         + " | ".join(f"{np.mean([r['mean_actions'][m] for r in res]):.1f}" for m in METHODS[1:])
         + " |",
+        *(
+            f"| {label}, ours | "
+            + " | ".join(scoring.one([r["field_scores"][m] for r in res], key) for m in METHODS)
+            + " |"
+            for key, label in zip(scoring.KEYS, scoring.HEADER.split(" / "), strict=True)
+        ),
         "",
         f"Error ordering sensor > gradient > ε-gradient > hand-coded > ballistic: {ordered}; "
         f"scores rising in the same order: {rising}; "
