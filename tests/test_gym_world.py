@@ -7,6 +7,7 @@ from __future__ import annotations
 import importlib.util
 import logging
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
@@ -20,6 +21,20 @@ from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.registry import make_world
 
 FROZEN_8x8 = {"map_name": "8x8", "is_slippery": "false"}
+
+
+class _MultiDiscreteEnv(gym.Env):
+    """An action space a world cannot serve."""
+
+    observation_space = gym.spaces.Discrete(3)
+    action_space = gym.spaces.MultiDiscrete([2, 2])
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        return 0, {}
+
+    def step(self, action):
+        return 0, 0.0, False, False, {}
 
 
 @pytest.fixture(autouse=True)
@@ -93,8 +108,9 @@ def test_environment_keyword_arguments_are_typed_and_checked():
         make_world("gym:FrozenLake-v1", None, 0, {"slippery": "true"})
     with pytest.raises(ParamError, match="is_slippery='maybe' is not a bool"):
         make_world("gym:FrozenLake-v1", None, 0, {"is_slippery": "maybe"})
-    with pytest.raises(ParamError, match="Box action space.*Discrete actions only"):
-        make_world("gym:Pendulum-v1", None, 0)
+    gym.register("sme-test/MultiDiscrete-v0", entry_point=_MultiDiscreteEnv)
+    with pytest.raises(ParamError, match="MultiDiscrete action space.*serves Discrete actions and bounded"):
+        make_world("gym:sme-test/MultiDiscrete-v0", None, 0)
     with pytest.raises(ParamError, match="did you mean 'FrozenLake-v1'"):
         make_world("gym:FrozenLak-v1", None, 0)
 
@@ -103,7 +119,7 @@ def test_environment_keyword_arguments_are_typed_and_checked():
     "args",
     [
         ["gym:FrozenLake-v1", "--param", "slippery=false"],
-        ["gym:Pendulum-v1"],
+        ["gym:no_such_pkg:Thing-v0"],
         ["gym:NoSuchEnv-v0"],
         ["gym:FrozenLake-v1", "--param", "is_slippery=maybe"],
         ["gym:LunarLander-v3"],  # Box2D is not a dependency: refused with gymnasium's install hint

@@ -162,7 +162,8 @@ def test_a_world_written_from_the_protocol_page_is_learned_by_the_generic_progra
             (r.get("world"), r.get("kind"), r.get("procrustes_error")) for r in rows
         ][-20:]
         fallback = [r for r in rows if r.get("kind") == "program_fallback"]
-        assert [r["world"] for r in fallback] == ["line-own"] and fallback[0]["reason"] == "outside-robot-v2"
+        # one fallback per attach (a hand-off to a worker attaches again), only for the world that asked
+        assert {r["world"] for r in fallback} == {"line-own"} and {r["reason"] for r in fallback} == {"outside-robot-v2"}
         attached = {r["world"]: r["config"]["program"] for r in rows if r.get("kind") == "attached"}
         assert attached == {"line-generic": "generic", "line-own": "generic"}
     finally:

@@ -23,7 +23,8 @@ Start states and truth come from the first of these that fits:
   initial ones and not ended on entry, truth the cell's (row, col) (Taxi: its decoded tuple);
 * classic control whose ``unwrapped.state`` can be set (`STATE_GRIDS`): a `start_grid` x
   `start_grid` grid over two state variables, truth those variables scaled to 0..1;
-* MiniGrid: every empty cell and heading the agent can stand on, truth the cell;
+* MiniGrid: every free cell the agent can stand on (facing east, or in all four headings with
+  `headings=4`), truth the cell;
 * panda-gym reach tasks: the target held at the middle of its range, start states a lattice of
   hand positions (`start_grid` per axis, at most 4) reached by inverse kinematics, truth the hand
   position;
@@ -79,6 +80,12 @@ class GymWorldParams:
         choices=("state", "pixels"),
     )
     pixels: int = option(64, "observe=pixels: frame side in pixels (grey)", min=8, max=512)
+    headings: int = option(
+        1,
+        "MiniGrid: start headings per cell (1: every start faces east; 4: all four - turning first "
+        "then mirrors the traces across the diagonal, and the map folds)",
+        choices=(1, 4),
+    )
 
 
 @dataclass(frozen=True)
@@ -580,7 +587,7 @@ class GymWorld(World):
             and u.grid.get(x, y).type != "goal"
             and u.grid.get(x, y).type != "lava"
         ]
-        self._starts = [(c, d) for c in cells for d in range(4)]
+        self._starts = [(c, d) for c in cells for d in range(self.params.headings)]
         self._truth = np.array([c for c, _ in self._starts], dtype=np.float64)
 
         def set_state(start: Any) -> Any:
@@ -589,7 +596,7 @@ class GymWorld(World):
             return u.gen_obs()
 
         self._set_start = set_state
-        return f"{len(self._starts)} starts: {len(cells)} free cells x 4 headings, truth the cell"
+        return f"{len(self._starts)} starts: {len(cells)} free cells x {self.params.headings} heading(s), truth the cell"
 
     def _panda_starts(self) -> str:
         u: Any = self.u
@@ -685,11 +692,12 @@ class GymWorld(World):
     def spec(self) -> WorldSpec:
         """The sensors; the environment's actions (discrete or a box); its start states and goal rule."""
         rr = getattr(self.u, "reward_range", None) or (-np.inf, np.inf)
-        params = {"env_id": self.env_id, "start_states": self.how, "max_episode_steps": str(self.max_episode_steps)}
+        params = {"env_id": self.env_id, "start_states": self.how}
         if self._truth is not None:
             params["truth_dims"] = str(self._truth.shape[1])
         params.update({k: str(v) for k, v in self.env_kwargs.items()})
         params.update({f.name: str(getattr(self.params, f.name)).lower() for f in fields(GymWorldParams)})
+        params["max_episode_steps"] = str(self.max_episode_steps)  # the limit in force (the parameter's 0 means "the environment's")
         if self._box is not None:
             b = self._box
             action_space = ActionSpace(low=tuple(float(v) for v in b.low), high=tuple(float(v) for v in b.high))

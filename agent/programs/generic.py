@@ -422,6 +422,7 @@ class GenericProgram(Program):
         self._sweep_w: np.ndarray | None = None  # the weights the sweep in progress follows
         self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
         self._sweep_rbf: _RBFFeatures | None = None  # that basis while the accepted policy is swept
+        self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
         self._diverged = False  # the trace in progress left the accepted policy's choices
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
@@ -646,10 +647,21 @@ class GenericProgram(Program):
         score = _sweep_score(sw.reached, sw.traces)
         frac, length = score
         good = frac >= self.params.watch_after
-        tol = 1.1 if self.stochastic else 1.0 + 1e-9
-        better = self._best is None or frac > self._best[0] or (frac == self._best[0] and length <= self._best[1] * tol)
+        best = self._best
+        if self.stochastic:  # sampled traces differ from sweep to sweep: within a tenth is as good
+            better = best is None or frac > best[0] or (frac == best[0] and length <= best[1] * 1.1)
+            equal = better
+        else:
+            better = best is None or frac > best[0] or (frac == best[0] and length < best[1] - 1e-9)
+            equal = best is not None and frac == best[0] and length <= best[1] + 1e-9
+        same = self._accepted_traces is not None and [list(t) for t in sw.traces] == self._accepted_traces
         self.phase = "explore"
-        if self._watching and not self._checking and not better and self._accepted is not None:
+        if self._watching and not self._checking and self._accepted is not None and not (better or same):
+            if equal:
+                # as good as the accepted policy but other traces (ties broken another way): its
+                # scores are fair for the detector; the accepted map stays the published one
+                self._perf.extend(self._unfed)
+                return None
             # the newest policy is worse than the accepted one: not published, not judged by the
             # detector; the accepted policy is swept again, so that a changed world still shows
             return self._start_sweep(check=True)
@@ -658,6 +670,7 @@ class GenericProgram(Program):
         relearned = good and self.relearn_at is not None
         if not self._checking and (better or not self._watching):
             self._accepted, self._best = np.array(self._sweep_w, copy=True), score
+            self._accepted_traces = [list(t) for t in sw.traces]
             self._accepted_basis = None if self.learner != "lspi" else _basis_state(self._rbf)
         self._watching = self._watching or good
         self._embed(step, relearned, k)
@@ -900,6 +913,7 @@ class GenericProgram(Program):
         self._perf.clear()
         self._watching = False
         self._accepted, self._best, self._checking = None, None, False
+        self._accepted_traces = None
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
         self.emit(
@@ -941,6 +955,7 @@ class GenericProgram(Program):
             "accepted_basis": self._accepted_basis,
             "sweep_on_accepted_basis": self._sweep_rbf is not None,
             "diverged": self._diverged,
+            "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
             "unfed": list(self._unfed),
         }
         if self.sarsa is not None:
@@ -984,6 +999,8 @@ class GenericProgram(Program):
         self._accepted_basis = None if ab is None else dict(ab)
         self._sweep_rbf = self._accepted_rbf() if state.get("sweep_on_accepted_basis") else None
         self._diverged = bool(state.get("diverged", False))
+        at = state.get("accepted_traces")
+        self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
         self._unfed = [float(v) for v in state.get("unfed", [])]
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
