@@ -30,6 +30,8 @@ class EventKind(StrEnum):
     POLICY_ITERATION = "policy_iteration"
     EVALUATION = "evaluation"
     WORLD_EVENT = "world_event"  # a WorldEvent the agent saw, `reason` = its kind
+    LEASE_LOST = "lease_lost"  # the world applies another owner's actions now: this agent stopped answering it
+    LEASE_REFUSED = "lease_refused"  # the world's lease is held by another owner; this agent waits (`reason`: held)
 
 
 class Trigger(StrEnum):
@@ -48,6 +50,7 @@ class WorldEventKind(StrEnum):
     ACTION_REFUSED = "action_refused"  # the world could not apply an action; it reset the episode instead
     CONTROL_APPLIED = "control_applied"
     CONTROL_REFUSED = "control_refused"
+    LEASE_LOST = "lease_lost"  # an action whose owner/epoch is not the current lease was not applied
 
 
 @dataclass(frozen=True)
@@ -209,6 +212,10 @@ class Action:
         The start state of that episode (-1 for a random one).
     timestamp : float
         Seconds since the epoch.
+    owner : str
+        The owner id answering ("" from agents that predate leases).
+    epoch : int
+        The lease epoch that owner holds on the world (0: no lease).
     """
 
     world_id: str
@@ -217,6 +224,8 @@ class Action:
     reset: bool = False
     start: int = -1
     timestamp: float = 0.0
+    owner: str = ""
+    epoch: int = 0
 
 
 @dataclass(frozen=True)
@@ -367,7 +376,11 @@ class AgentEvent:
 
 @dataclass(frozen=True)
 class WorldEvent:
-    """Something a world reports about itself (e.g. an action it could not apply)."""
+    """Something a world reports about itself (e.g. an action it could not apply).
+
+    Kind ``lease_lost`` also names the owner whose action was not applied and the epoch it
+    carried (`owner`, `epoch`), and the lease as it stands (`holder`, `holder_epoch`).
+    """
 
     world_id: str
     kind: str
@@ -375,6 +388,62 @@ class WorldEvent:
     detail: str = ""
     step: int = 0
     session: str = ""
+    timestamp: float = 0.0
+    owner: str = ""
+    epoch: int = 0
+    holder: str = ""
+    holder_epoch: int = 0
+
+
+@dataclass(frozen=True)
+class LeaseRequest:
+    """An owner asks a world for its lease (or gives it back, `release`), on `.../lease`.
+
+    Attributes
+    ----------
+    world_id, owner : str
+        The world asked and the asking owner.
+    epoch : int
+        The epoch the asker holds (0: none); with `release`, the epoch given back.
+    release : bool
+        Give the lease back instead of asking for it.
+    """
+
+    world_id: str
+    owner: str
+    epoch: int = 0
+    release: bool = False
+
+
+@dataclass(frozen=True)
+class Lease:
+    """A world's answer to a `LeaseRequest`: its lease as it stands after the request.
+
+    Attributes
+    ----------
+    world_id, session : str
+        The world and its process's session (epochs count within one session).
+    holder : str
+        The owner whose actions are applied ("" while nobody holds the lease).
+    epoch : int
+        The current epoch; it only grows within a session.
+    granted : bool
+        Whether the asker holds the lease now.
+    reason : str
+        ``granted``, ``renewed``, ``held`` (another owner holds it), ``released``, ``not_holder``.
+    ttl : float
+        Seconds of silence after which a live holder's lease may be granted to another owner.
+    timestamp : float
+        Seconds since the epoch.
+    """
+
+    world_id: str
+    session: str
+    holder: str
+    epoch: int
+    granted: bool
+    reason: str = ""
+    ttl: float = 0.0
     timestamp: float = 0.0
 
 
