@@ -380,6 +380,7 @@ def _dec_act(p: pb.Action) -> m.Action:
     if len(p.values) > MAX_TENSORS:
         raise errors.OversizeMessage(f"Action has {len(p.values)} values, at most {MAX_TENSORS}")
     vals = tuple(_finite(v, f"Action(step={p.step}) value") for v in p.values)
+    _lease_id(p.owner, "Action owner", empty=True)
     return m.Action(p.world_id, p.step, vals, p.reset, p.start, p.timestamp, p.owner, p.epoch)
 
 
@@ -423,7 +424,17 @@ def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:
 
 def _dec_world_event(p: pb.WorldEvent) -> m.WorldEvent:
     return m.WorldEvent(
-        p.world_id, p.kind, p.reason, p.detail, p.step, p.session, p.timestamp, p.owner, p.epoch, p.holder, p.holder_epoch
+        p.world_id,
+        p.kind,
+        p.reason,
+        p.detail,
+        p.step,
+        p.session,
+        p.timestamp,
+        p.owner,
+        p.epoch,
+        p.holder,
+        p.holder_epoch,
     )
 
 
