@@ -165,6 +165,7 @@ class AgentDaemon:
         self._last_shed = 0.0
         self._bad_ids: set[str] = set()  # world tokens whose id is not a valid id
         self._failed: set[str] = set()  # claimed worlds whose attach failed (until they vanish)
+        self._retry_spec: dict[str, float] = {}  # failed for no spec reply (transient?): tried again from then
         self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
         self.workers = tuple(workers)
         self.all_obs = all_obs
@@ -677,6 +678,7 @@ class AgentDaemon:
             self.schedule.forget(wid)
         held = self._claims.pop(wid, None)
         self._failed.discard(wid)
+        self._retry_spec.pop(wid, None)
         for sub in self._obs_subs.pop(wid, ()):
             self.bus.undeclare(sub)
         if held is not None:
@@ -685,6 +687,7 @@ class AgentDaemon:
 
     # leases (see agent.lease) ---------------------------------------------------------------------
     LEASE_RETRY = 0.5  # seconds between two lease requests to a world whose lease another owner holds
+    SPEC_RETRY = 5.0  # seconds after which a claimed world whose spec query went unanswered is tried again
 
     def _lease_get(self, key: str, payload: bytes, timeout: float) -> list[bytes]:
         return [r.payload for r in self.bus.get(key, timeout=timeout, payload=payload)]
@@ -790,6 +793,10 @@ class AgentDaemon:
             if "wins" in why:
                 self.counters["lost"] += 1
                 self._elsewhere.add(w)
+                link = self.links.get(w)
+                if link is not None and link.state == "attached":  # the winner resumes from here
+                    self._stop_answering(w, why)
+                    self.share(only=w)
             self._release(w, why)
         if p.shed is not None:
             self._last_shed = now
@@ -814,6 +821,9 @@ class AgentDaemon:
             link = self.links.get(w)
             if link is not None and link.state == "attached":
                 continue
+            if w in self._failed and now >= self._retry_spec.get(w, float("inf")):
+                self._failed.discard(w)  # no spec reply last time (a route being rebuilt?): once more
+                self._retry_spec.pop(w, None)
             if w in self._failed or any(o < self.owner_id for o in self.book.view().claimants(w)):
                 continue  # tried once this appearance / withdrawn at the next tick
             if now - self._waiting.get(w, float("-inf")) < self.LEASE_RETRY:
@@ -840,6 +850,8 @@ class AgentDaemon:
             self._attach_failed(wid, "bad_spec", e)
             return
         except (ValueError, BusError) as e:
+            if isinstance(e, BusError):
+                self._retry_spec[wid] = time.monotonic() + self.SPEC_RETRY
             self._attach_failed(wid, "no_spec", e)
             return
         if spec.program == EXTERNAL_PROGRAM:  # an outside controller answers it (a Gymnasium BusEnv)

@@ -13,6 +13,7 @@ such a world ignores and a leasing world applies only while nobody holds its lea
 from __future__ import annotations
 
 import logging
+import secrets
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -108,7 +109,9 @@ class LeaseClient:
     def acquire(self, world_id: str, epoch: int = 0, tries: int = 2) -> Outcome:
         """Ask world `world_id` for its lease (`epoch`: the one held, to renew it). A world that
         does not answer after `tries` queries is taken for one without leases (``no_lease``)."""
-        payload = codec.encode(LeaseRequest(world_id, self.owner, epoch))
+        # one id for every try: a copy that arrives twice (two routers) or a retry after a lost reply
+        # gets the same lease, not a second grant that would fence the first
+        payload = codec.encode(LeaseRequest(world_id, self.owner, epoch, request_id=secrets.token_hex(8)))
         out = Outcome(False, reason="no_lease")
         for _ in range(tries):
             try:

@@ -257,7 +257,12 @@ def _enc_world_event(x: m.WorldEvent) -> pb.WorldEvent:
 
 def _enc_lease_request(x: m.LeaseRequest) -> pb.LeaseRequest:
     return pb.LeaseRequest(
-        schema_version=m.SCHEMA_VERSION, world_id=x.world_id, owner=x.owner, epoch=x.epoch, release=x.release
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        owner=x.owner,
+        epoch=x.epoch,
+        release=x.release,
+        request_id=x.request_id,
     )
 
 
@@ -446,8 +451,14 @@ def _lease_id(value: str, what: str, empty: bool = False) -> str:
 
 
 def _dec_lease_request(p: pb.LeaseRequest) -> m.LeaseRequest:
+    if len(p.request_id) > 64:
+        raise errors.MalformedMessage(f"LeaseRequest request_id is {len(p.request_id)} characters, at most 64")
     return m.LeaseRequest(
-        _lease_id(p.world_id, "LeaseRequest world_id"), _lease_id(p.owner, "LeaseRequest owner"), p.epoch, p.release
+        _lease_id(p.world_id, "LeaseRequest world_id"),
+        _lease_id(p.owner, "LeaseRequest owner"),
+        p.epoch,
+        p.release,
+        p.request_id,
     )
 
 

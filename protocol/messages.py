@@ -407,12 +407,16 @@ class LeaseRequest:
         The epoch the asker holds (0: none); with `release`, the epoch given back.
     release : bool
         Give the lease back instead of asking for it.
+    request_id : str
+        Random per request: a second copy of the same request (a message can arrive twice, once
+        through each of two routers) gets the same answer instead of a second grant.
     """
 
     world_id: str
     owner: str
     epoch: int = 0
     release: bool = False
+    request_id: str = ""
 
 
 @dataclass(frozen=True)

@@ -288,18 +288,20 @@ class WorldEvent(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., kind: _Optional[str] = ..., reason: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., owner: _Optional[str] = ..., epoch: _Optional[int] = ..., holder: _Optional[str] = ..., holder_epoch: _Optional[int] = ...) -> None: ...
 
 class LeaseRequest(_message.Message):
-    __slots__ = ("schema_version", "world_id", "owner", "epoch", "release")
+    __slots__ = ("schema_version", "world_id", "owner", "epoch", "release", "request_id")
     SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
     WORLD_ID_FIELD_NUMBER: _ClassVar[int]
     OWNER_FIELD_NUMBER: _ClassVar[int]
     EPOCH_FIELD_NUMBER: _ClassVar[int]
     RELEASE_FIELD_NUMBER: _ClassVar[int]
+    REQUEST_ID_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     world_id: str
     owner: str
     epoch: int
     release: bool
-    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., owner: _Optional[str] = ..., epoch: _Optional[int] = ..., release: _Optional[bool] = ...) -> None: ...
+    request_id: str
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., owner: _Optional[str] = ..., epoch: _Optional[int] = ..., release: _Optional[bool] = ..., request_id: _Optional[str] = ...) -> None: ...
 
 class Lease(_message.Message):
     __slots__ = ("schema_version", "world_id", "session", "holder", "epoch", "granted", "reason", "ttl", "timestamp")

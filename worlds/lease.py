@@ -8,9 +8,13 @@ owner id and that epoch. An action from anyone else is not applied; its owner is
 `WorldEvent` of kind ``lease_lost``. See protocol/README.md, "Leases", for the contract.
 
 Granting rules (request from owner O carrying epoch e):
+- a second copy of the request that made the current lease (same `request_id`: a message can
+  arrive twice, once through each of two routers): the same answer again;
 - O holds the lease at epoch e: renewed, same epoch;
-- nobody holds it, its holder's owner token vanished, its holder was silent for `ttl` seconds, or O
-  holds it under another epoch (O restarted): granted to O with epoch + 1;
+- nobody holds it, its holder was silent for `ttl` seconds, its holder's owner token vanished and it
+  was silent for `gone_grace` seconds (liveliness alone is not trusted: in a partition a token can
+  vanish on one path while its owner still answers on another), or O holds it under another epoch
+  (O restarted): granted to O with epoch + 1;
 - otherwise refused (``held``): the holder is alive and answering.
 A release from the holder of the current epoch frees the lease (the epoch stays: it never goes
 back). Actions with epoch 0 (agents that predate leases) are applied only while nobody holds it.
@@ -67,6 +71,8 @@ class LeaseKeeper:
         another owner (inf: only on release or when the holder's owner token vanishes).
     lost_every : float, default 0.5
         Seconds between two ``lease_lost`` events to the same (owner, epoch).
+    gone_grace : float, default 0.25
+        Seconds of silence after which a holder whose owner token vanished loses the lease.
 
     Examples
     --------
@@ -79,13 +85,17 @@ class LeaseKeeper:
     True
     """
 
-    def __init__(self, world_id: str, session: str, ttl: float = 1.5, lost_every: float = 0.5) -> None:
+    def __init__(
+        self, world_id: str, session: str, ttl: float = 1.5, lost_every: float = 0.5, gone_grace: float = 0.25
+    ) -> None:
         if not ttl > 0:
             raise ValueError(f"lease ttl must be > 0 seconds, not {ttl}")
         self.world_id = world_id
         self.session = session
         self.ttl = float(ttl)
         self.lost_every = lost_every
+        self.gone_grace = gone_grace
+        self._granted_by = ""  # request_id of the request that made the current lease
         self.holder = ""
         self.epoch = 0
         self.heard = 0.0  # monotonic time of the holder's last grant or applied action
@@ -102,7 +112,8 @@ class LeaseKeeper:
 
     def free(self, now: float) -> bool:
         """Whether the lease may go to a new owner now."""
-        return not self.holder or self.holder in self._gone or now - self.heard >= self.ttl
+        silent = now - self.heard
+        return not self.holder or silent >= self.ttl or (self.holder in self._gone and silent >= self.gone_grace)
 
     def _lease(self, granted: bool, reason: str) -> Lease:
         return Lease(self.world_id, self.session, self.holder, self.epoch, granted, reason, self.ttl, time.time())
@@ -111,6 +122,8 @@ class LeaseKeeper:
         """Answer a lease request (see the module docstring for the rules)."""
         if req.world_id != self.world_id:
             return self._lease(False, "not_holder")
+        if req.request_id and req.request_id == self._granted_by and req.owner == self.holder:
+            return self._lease(True, "granted")  # a copy of the request that made this lease
         if req.release:
             if req.owner == self.holder and req.epoch == self.epoch:
                 self.holder = ""
@@ -123,6 +136,7 @@ class LeaseKeeper:
         if req.owner == self.holder or self.free(now):
             self.epoch += 1
             self.holder = req.owner
+            self._granted_by = req.request_id
             self.heard = now
             self.counts.granted += 1
             self._gone.discard(req.owner)

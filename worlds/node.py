@@ -55,7 +55,8 @@ class NodeStats:
     actions_received: int = 0  # valid actions received (duplicates and stale ones included)
     actions_ignored: int = 0  # of those, answers to a step already answered or not the one awaited
     # actions not from the current lease are not counted above: see `lease` (actions_fenced)
-    max_wait: float = 0.0  # longest time (s) an observation waited for its answer
+    max_wait: float = 0.0  # longest time (s) an observation waited for its answer (the first one excepted)
+    max_wait_at: float = 0.0  # when (time.time()) that answer came
     lease: LeaseCounts = field(default_factory=LeaseCounts)  # the lease keeper's counts (shared)
     rejected: dict[str, int] = field(default_factory=dict)
     controls: int = 0
@@ -77,6 +78,7 @@ class NodeStats:
             "actions_ignored": self.actions_ignored,
             "controls": self.controls,
             "max_wait_s": round(self.max_wait, 3),
+            "max_wait_at": round(self.max_wait_at, 3),
             "rejected": dict(self.rejected),
             **self.lease.summary(),
             "seconds": round(self.seconds, 3),
@@ -322,8 +324,8 @@ class WorldNode:
         st.steps += 1
         self._data = self._publish(lock)
         now = time.perf_counter()
-        if now - self._sent > st.max_wait:
-            st.max_wait = now - self._sent
+        if st.steps > 1 and now - self._sent > st.max_wait:  # (the first waits for an agent to attach)
+            st.max_wait, st.max_wait_at = now - self._sent, time.time()
         self._sent = self._put_at = now
         if (self.max_steps is not None and st.steps >= self.max_steps) or (
             self.seconds is not None and self._sent - self._t0 >= self.seconds
