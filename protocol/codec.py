@@ -267,7 +267,8 @@ def _enc_lease_request(x: m.LeaseRequest) -> pb.LeaseRequest:
 
 
 def _enc_lease(x: m.Lease) -> pb.Lease:
-    _finite(float(x.ttl), "Lease ttl")
+    if math.isnan(x.ttl) or x.ttl < 0:
+        raise errors.NonFiniteValue(f"Lease ttl is {x.ttl!r}; a number >= 0 (inf: never) is expected")
     return pb.Lease(
         schema_version=m.SCHEMA_VERSION,
         world_id=x.world_id,
