@@ -169,6 +169,7 @@ class WorldNode:
         self.session = secrets.token_hex(6)
         self.stats = NodeStats()
         self.lease = LeaseKeeper(self.world_id, self.session, lease_ttl)
+        self._owner_lock = threading.Lock()
         self.stats.lease = self.lease.counts
         self.stop_event = threading.Event()
         self._cv = threading.Condition()  # re-entrant: a signal handler may notify while run() holds it
@@ -258,7 +259,7 @@ class WorldNode:
         return codec.encode(lease)
 
     def _on_owner(self, key: str, alive: bool) -> None:
-        with self._cv:
+        with self._owner_lock:  # not _cv: run() holds it while it declares this watch
             self.lease.owner_alive(keys.last_chunk(key), alive)
 
     def _answer_truth(self, key: str, payload: bytes | None) -> bytes:
@@ -379,7 +380,6 @@ class WorldNode:
         bus.queryable(keys.world_spec(wid), lambda k, p: spec_bytes, codec.schema_name(WorldSpec))
         bus.queryable(keys.world_truth(wid), self._answer_truth, codec.schema_name(Truth))
         bus.queryable(keys.world_lease(wid), self._answer_lease, codec.schema_name(Lease))
-        bus.watch_alive(keys.ALL_ALIVE_OWNERS, self._on_owner, history=True)
         bus.subscribe(keys.world_act(wid), self._on_action)
         bus.subscribe(keys.world_ctl(wid), self._on_control)
         pub = bus.publisher(keys.world_obs(wid), codec.schema_name(Observation))
@@ -398,6 +398,9 @@ class WorldNode:
             self._data = self._publish(lock)
             self._sent = self._put_at = time.perf_counter()
             self._lock_step = lock
+            # the owners' tokens (a vanished lease holder loses its lease sooner); after the first
+            # observation, which nothing here needs to wait for
+            bus.watch_alive(keys.ALL_ALIVE_OWNERS, self._on_owner, history=True)
             while not self.stop_event.is_set():
                 self._cv.wait(max(self.resend - (time.perf_counter() - self._put_at), 0.001))
                 now = time.perf_counter()
