@@ -125,6 +125,10 @@ def test_two_agents_share_four_worlds_then_one_is_killed_and_the_other_resumes_i
         # resumed from what a learned (not relearned), and numbered after a's versions (none repeated)
         assert first_after["procrustes_error"] <= 1.5 * before["procrustes_error"], (w, first_after, before)
         assert first_after["version"] > before["version"], (w, first_after, before)
+        print(
+            f"takeover {w}: last before v{before['version']} {before['procrustes_error']:.4f}, first after "
+            f"v{first_after['version']} {first_after['procrustes_error']:.4f}, answered again after {took:.2f} s"
+        )
     for p in ws.values():
         assert procs.stop(p) == 0
     for w in worlds:
