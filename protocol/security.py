@@ -99,7 +99,7 @@ AGENT_PUTS = [
     f"{PREFIX}/agent/*/checkpoint/*",
 ]
 AGENT_TOKENS = [f"{PREFIX}/alive/agent/*", f"{PREFIX}/alive/owner/*", f"{PREFIX}/alive/claim/*/*"]
-AGENT_SERVES = [f"{PREFIX}/agent/*/status"]
+AGENT_SERVES = [f"{PREFIX}/agent/*/status", f"{PREFIX}/agent/*/checkpoint/*"]
 PERTURB_PUTS = [f"{W}/ctl"]
 
 
