@@ -93,6 +93,7 @@ def attach(
     restored: Restored | None = None,
     program: Program | None = None,
     detector: DropDetector | None = None,
+    last_published: int = 0,
 ) -> Attached:
     """Make (or resume) the link for a world that (re)appeared with `spec`.
 
@@ -117,6 +118,11 @@ def attach(
         State read back from a checkpoint.
     program, detector : optional
         A program (and detector) the caller built, used when there is nothing to resume or restore.
+    last_published : int, default 0
+        The highest embedding version of this world seen on the bus (any agent). A new or restored
+        link whose state is older goes on numbering after it (a version is never published twice
+        with different maps), and its `attached` event says how far behind the state is
+        (`values`: ``checkpoint_version``, ``last_published_version``).
 
     Returns
     -------
@@ -150,7 +156,7 @@ def attach(
         detector = make_detector(config.detector, **program.detector_params)
     link = WorldLink(config.agent_id, spec, program, publish, detector)
     link.truth = truth
-    link.version = version
+    link.version = max(version, last_published)
     if how == "restored" and restored is not None:
         link.steps_before = restored.steps
     asked = spec.program or spec.kind
@@ -160,12 +166,20 @@ def attach(
             f"this agent has no program {asked!r}; the {program.name} program learns the world instead",
             reason=asked,
         )
-    link.event(
-        EventKind.ATTACHED,
+    detail = (
         f"{spec.kind} with program {program.name} ({how}"
         + (f" at embedding v{version}, {link.steps_before:,} steps learned)" if how == "restored" else ")")
-        + (f": {program.describe()}" if program.describe() else ""),
-        reason=how,
-        config=cfg,
+        + (f": {program.describe()}" if program.describe() else "")
     )
+    values: dict[str, float] = {}
+    if last_published > version:
+        values = {"checkpoint_version": float(version), "last_published_version": float(last_published)}
+        if how == "restored":
+            detail += (
+                f"; the state is older than the last published embedding v{last_published} "
+                f"({last_published - version} version(s) behind); versions go on from v{last_published}"
+            )
+        else:
+            detail += f"; no state behind the published embedding v{last_published}: versions go on from there"
+    link.event(EventKind.ATTACHED, detail, values=values, reason=how, config=cfg)
     return Attached(link, how)

@@ -57,6 +57,8 @@ class Checkpoint:
     detector_state: dict[str, Any] | None = None
     saved_at: float = 0.0  # seconds since the epoch when the state was taken (0: unknown); orders shared copies
     steps: int = 0  # steps the link had answered when the state was taken (informative)
+    owner: str = ""  # the owner that answered the world when the state was taken ("" unknown)
+    epoch: int = 0  # that owner's lease epoch on the world (0: none or unknown)
 
     def same_body(self, spec: WorldSpec) -> bool:
         """True when `spec` describes the body this state was learned on (kind, program hint,
@@ -127,6 +129,8 @@ def encode_checkpoint(ckpt: Checkpoint) -> bytes:
         "detector_state": _flatten(ckpt.detector_state, "detector_state", arrays),
         "saved_at": float(ckpt.saved_at),
         "steps": int(ckpt.steps),
+        "owner": ckpt.owner,
+        "epoch": int(ckpt.epoch),
     }
     text = json.dumps(meta, allow_nan=True, separators=(",", ":")).encode("utf-8")
     buf = io.BytesIO()
@@ -298,7 +302,17 @@ def _checkpoint(
         detector_state=None if detector is None else _unflatten(detector, arrays),
         saved_at=_optional_number(meta, "saved_at", float),
         steps=int(_optional_number(meta, "steps", int)),
+        owner=_optional_str(meta, "owner"),
+        epoch=int(_optional_number(meta, "epoch", int)),
     )
+
+
+def _optional_str(meta: dict, key: str) -> str:
+    """An optional text entry ("" when absent: files written before it existed)."""
+    value = meta.get(key, "")
+    if not isinstance(value, str) or len(value) > 64:
+        raise CheckpointError(f"the entry {key!r} has the wrong type or is over 64 characters")
+    return value
 
 
 def _optional_number(meta: dict, key: str, kind: type) -> float:

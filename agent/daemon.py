@@ -29,13 +29,14 @@ from sensorimotor.agent.attach import AgentConfig, Restored, attach, program_nam
 from sensorimotor.agent.checkpoint import (
     Checkpoint,
     CheckpointError,
-    decode_checkpoint,
     encode_checkpoint,
     read_checkpoint,
     set_aside_checkpoint,
     write_atomically,
 )
+from sensorimotor.agent.checkpoint_store import MAX_SHARED_BYTES, SharedCheckpoints, ShareSchedule
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
+from sensorimotor.agent.lease import LeaseClient, Outcome, lost_by
 from sensorimotor.agent.link import WorldLink, check_truth
 from sensorimotor.agent.ownership import OwnerBook, claim_key, plan
 from sensorimotor.agent.programs.registry import check_program_params, make_program
@@ -51,6 +52,7 @@ from sensorimotor.protocol.messages import (
     EventKind,
     Truth,
     WorldEvent,
+    WorldEventKind,
     WorldSpec,
 )
 from sensorimotor.protocol.params import as_strings, parse
@@ -99,6 +101,11 @@ class AgentDaemon:
     share_every : float or None, default None
         Seconds between checkpoints shared on the bus while another owner is alive (default:
         `checkpoint_every`; None there too: never).
+    share_on_embedding : float or None, default 2.0
+        Also share a world's checkpoint soon after each new embedding version, at most once per
+        this many seconds per world (None: only periodically); see `agent.checkpoint_store`.
+    share_max_bytes : int, default MAX_SHARED_BYTES
+        Checkpoints larger than this are not shared on the bus (nor accepted from it).
     all_obs : bool, default True
         Subscribe to every world's observations, truth and events (those of worlds it does not answer are
         counted); False: only to the worlds it claims (the workers, so that N workers do not each receive all).
@@ -132,6 +139,8 @@ class AgentDaemon:
         share_every: float | None = None,
         workers: tuple[str, ...] = (),
         all_obs: bool = True,
+        share_on_embedding: float | None = 2.0,
+        share_max_bytes: int = MAX_SHARED_BYTES,
     ) -> None:
         make_detector(detector)  # fail early on an unknown name
         self.detector = detector
@@ -145,11 +154,18 @@ class AgentDaemon:
         self.book = OwnerBook()
         self._claims: dict[str, tuple[Any, float]] = {}  # world -> (claim token, monotonic time declared)
         self._avoid: dict[str, float] = {}  # world -> monotonic time until which it is not claimed again
-        self._shared: dict[str, Checkpoint] = {}  # world -> newest checkpoint another owner shared
+        self.store = SharedCheckpoints(share_max_bytes)  # the newest copy of each world another owner shared
+        self._own_shared: dict[str, tuple[float, bytes]] = {}  # world -> (saved_at, bytes) this owner last shared
+        self.schedule = ShareSchedule(share_on_embedding) if share_on_embedding is not None else None
+        self.leases = LeaseClient(self._lease_get, self.owner_id)
+        self._oversize_told: set[str] = set()  # worlds whose checkpoint was too big to share (logged once)
+        self._waiting: dict[str, float] = {}  # world -> monotonic time its lease was last refused (asked again)
+        self._lost: queue.Queue[tuple[str, WorldEvent]] = queue.Queue()  # lease_lost events, for the run loop
         self._stopped_at: dict[str, float] = {}  # world -> time.time() this daemon last stopped answering it
         self._last_shed = 0.0
         self._bad_ids: set[str] = set()  # world tokens whose id is not a valid id
         self._failed: set[str] = set()  # claimed worlds whose attach failed (until they vanish)
+        self._retry_spec: dict[str, float] = {}  # failed for no spec reply (transient?): tried again from then
         self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
         self.workers = tuple(workers)
         self.all_obs = all_obs
@@ -175,6 +191,12 @@ class AgentDaemon:
             "shed": 0,  # worlds handed off to balance the load
             "shared": 0,  # checkpoints shared on the bus
             "taken_over": 0,  # links restored from another owner's shared checkpoint
+            "shared_on_embedding": 0,  # of the shared, those made soon after a new embedding version
+            "share_oversize": 0,  # checkpoints not shared: over share_max_bytes
+            "lease_granted": 0,  # leases the worlds granted this owner
+            "lease_refused": 0,  # lease requests refused (another live owner holds the world)
+            "lease_lost": 0,  # worlds that applied another owner's actions: stopped answering them
+            "unfenced": 0,  # attaches to worlds without a lease queryable (answered with epoch 0)
         }
         if link_ttl is not None and link_ttl <= 0:
             raise ValueError(f"link_ttl must be > 0 seconds (or None: never release), not {link_ttl}")
@@ -225,6 +247,10 @@ class AgentDaemon:
         except Exception:
             if not self.bus.closed:
                 log.exception("publishing on %s failed", key)
+        if channel == "embedding":
+            self.store.published(wid, msg.version)
+            if self.schedule is not None:
+                self.schedule.new_version(wid, time.monotonic())
         if self.on_output is not None and channel != "act":
             self.on_output(channel, msg)
 
@@ -268,17 +294,29 @@ class AgentDaemon:
         owner, wid = parts[-3], parts[-1]
         if owner == self.owner_id:
             return
+        why = self.store.offer(owner, wid, msg.payload)
+        if why is not None:
+            log.warning("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], why)
+
+    def _on_embedding(self, msg: BusMessage) -> None:
+        """Note the embedding version any agent published (a takeover says when its copy is older)."""
         try:
-            ckpt = decode_checkpoint(msg.payload)
-        except CheckpointError as e:
-            log.warning("checkpoint shared by %s for world %s refused: %s", owner, wid, e)
-            return
-        if ckpt.world_id != wid:
-            log.warning("checkpoint shared by %s on world %s's key is for world %s: refused", owner, wid, ckpt.world_id)
-            return
-        old = self._shared.get(wid)
-        if old is None or ckpt.saved_at >= old.saved_at:
-            self._shared[wid] = ckpt
+            emb = codec.decode(Embedding, msg.payload)
+        except ProtocolError:
+            return  # not ours to judge: watchers report bad embeddings
+        if emb.world_id == keys.last_chunk(msg.key):
+            self.store.published(emb.world_id, emb.version)
+
+    def _answer_checkpoint(self, key: str, payload: bytes | None) -> bytes:
+        """The checkpoint queryable: the newest copy this owner holds of the world asked (its own
+        last share or another owner's), so a new owner resumes from the newest copy any agent
+        holds; empty when it holds none."""
+        wid = keys.last_chunk(key)
+        copy = self.store.newest(wid)
+        own = self._own_shared.get(wid)
+        if own is not None and (copy is None or own[0] >= copy.checkpoint.saved_at):
+            return own[1]
+        return copy.data if copy is not None else b""
 
     # truth and world events for a world without a link are counted as `unattached`, like its
     # observations; a refused one as bad_truth / bad_world_event (the link keeps its truth)
@@ -309,6 +347,12 @@ class AgentDaemon:
             self.counters["bad_world_event"] += 1
             log.warning("world %s: bad world event: %s", link.world_id, e)
             return
+        if ev.kind == WorldEventKind.LEASE_LOST:
+            if link.state == "attached" and lost_by(ev, self.owner_id, link.epoch):
+                with link.lock:  # stop at once; the run loop withdraws the claim and says so
+                    link.pause()
+                self._lost.put((link.world_id, ev))
+            return  # addressed to another owner (or an old epoch of ours): nothing to do here
         link.world_event(ev)
 
     def _status(self, key: str, payload: bytes | None) -> bytes:
@@ -379,7 +423,8 @@ class AgentDaemon:
 
         A checkpoint another owner shared on the bus is used instead when it is newer than the file
         (or there is no file); with `newer_than` (a time.time()), only one saved after it is used."""
-        shared = self._shared.get(spec.world_id)
+        copy = self._newest_copy(spec.world_id, ask=newer_than is None)
+        shared = copy.checkpoint if copy is not None else None
         if shared is not None and newer_than is not None and shared.saved_at <= newer_than:
             shared = None
         if shared is not None and not shared.same_body(spec):
@@ -391,18 +436,39 @@ class AgentDaemon:
                 restored = self._restore(spec, shared, "shared checkpoint")
             except _Unrestorable as e:
                 log.warning("world %s: the checkpoint shared on the bus %s", spec.world_id, e)
-                self._shared.pop(spec.world_id, None)
+                self.store.drop(spec.world_id)
             else:
                 self.counters["taken_over"] += 1
                 log.info(
-                    "world %s: resuming from the checkpoint shared on the bus (embedding v%d, %d steps, %.1f s old)",
+                    "world %s: resuming from the checkpoint %s shared on the bus (embedding v%d, %d steps, %.1f s old)",
                     spec.world_id,
+                    shared.owner or (copy.owner if copy is not None else "?"),
                     shared.version,
                     shared.steps,
                     time.time() - shared.saved_at,
                 )
                 return restored
         return local[0] if local is not None else None
+
+    def _newest_copy(self, wid: str, ask: bool) -> Any:
+        """The newest shared copy of world `wid` this owner holds; with `ask`, first ask every
+        other owner for the copy it holds (a takeover resumes from the newest copy any agent holds,
+        also one shared before this owner was listening)."""
+        if ask and self.book.view().owners - {self.owner_id}:
+            try:
+                replies = self.bus.get(f"{keys.PREFIX}/agent/*/checkpoint/{wid}", timeout=1.0)
+            except (BusError, ValueError) as e:
+                log.debug("world %s: asking for checkpoints failed: %s", wid, e)
+                replies = []
+            except Exception as e:  # noqa: BLE001 - a closing session: use what is held
+                log.debug("world %s: asking for checkpoints failed: %s", wid, e)
+                replies = []
+            for r in replies:
+                if r.payload:
+                    why = self.store.offer("?", wid, r.payload, exclude=self.owner_id)
+                    if why is not None:
+                        log.warning("world %s: a checkpoint another owner holds was refused: %s", wid, why)
+        return self.store.newest(wid)
 
     def _restore(self, spec: WorldSpec, saved: Checkpoint, what: str) -> Restored:
         """The program (and detector) rebuilt from checkpoint `saved`; _Unrestorable says why not."""
@@ -495,6 +561,11 @@ class AgentDaemon:
 
     def _encoded_state(self, wid: str, link: WorldLink) -> bytes | None:
         """Link `link`'s learned state as checkpoint bytes (None, logged, if it cannot be encoded)."""
+        encoded = self._encoded_snapshot(wid, link)
+        return None if encoded is None else encoded[1]
+
+    def _encoded_snapshot(self, wid: str, link: WorldLink) -> tuple[float, bytes] | None:
+        """Link `link`'s learned state as (saved_at, checkpoint bytes); None, logged, if it cannot be encoded."""
         with link.lock:  # a consistent snapshot (copies): it is written while the link runs on
             program, spec = link.program, link.spec
             ckpt = Checkpoint(
@@ -510,34 +581,66 @@ class AgentDaemon:
                 detector_state=link.detector.state() if link.detector is not None else None,
                 saved_at=time.time(),
                 steps=link.learned_steps,
+                owner=self.owner_id,
+                epoch=link.epoch,
             )
         try:
-            return encode_checkpoint(ckpt)
+            return ckpt.saved_at, encode_checkpoint(ckpt)
         except ValueError:  # a program whose state is not arrays and plain values: a bug, not fatal
             log.exception("world %s: checkpoint not written", wid)
             return None
 
-    def share(self, only: str | None = None) -> int:
-        """Put the learned state of every world this daemon answers (or only `only`) on the bus, for
-        the other owners to resume from if this one dies; nothing while no other owner is alive.
-        Returns how many were shared."""
+    def share(self, only: str | None = None, worlds: list[str] | None = None) -> int:
+        """Put the learned state of every world this daemon answers (or only `only`, or only those
+        in `worlds` that are attached) on the bus, for the other owners to resume from if this one
+        dies; nothing while no other owner is alive. A checkpoint over `share_max_bytes` is not
+        shared (counted `share_oversize`, logged). Returns how many were shared."""
         if not (self.book.view().owners - {self.owner_id}):
             return 0
         n = 0
         for wid, link in list(self.links.items()):
-            if (only is not None and wid != only) or wid not in self._claims:
+            if (only is not None and wid != only) or (worlds is not None and wid not in worlds):
                 continue
-            if only is None and link.state != "attached":
+            if wid not in self._claims or (only is None and link.state != "attached"):
                 continue
-            data = self._encoded_state(wid, link)
-            if data is None:
+            encoded = self._encoded_snapshot(wid, link)
+            if encoded is None:
+                continue
+            if self.schedule is not None:
+                self.schedule.shared(wid, time.monotonic())
+            if len(encoded[1]) > self.store.max_bytes:
+                if wid not in self._oversize_told:
+                    self._oversize_told.add(wid)
+                    log.warning(
+                        "world %s: checkpoint of %d bytes is over the %d shared on the bus: not shared "
+                        "(a takeover would start from an older copy or fresh)",
+                        wid,
+                        len(encoded[1]),
+                        self.store.max_bytes,
+                    )
+                self.counters["share_oversize"] += 1
                 continue
             try:
-                self.bus.put(keys.agent_checkpoint(self.owner_id, wid), data, None)
+                self.bus.put(keys.agent_checkpoint(self.owner_id, wid), encoded[1], None)
+                self._own_shared[wid] = encoded
                 n += 1
             except Exception as e:  # noqa: BLE001 - a closing bus: the next share will do
                 log.warning("world %s: checkpoint not shared: %s", wid, e)
         self.counters["shared"] += n
+        return n
+
+    def share_new_versions(self, now: float | None = None) -> int:
+        """Share the worlds that published a new embedding version since their last share, each at
+        most once per `share_on_embedding` seconds (see `ShareSchedule`). Returns how many were shared."""
+        if self.schedule is None:
+            return 0
+        due = self.schedule.take(time.monotonic() if now is None else now)
+        if not due:
+            return 0
+        n = self.share(worlds=due)
+        for w in due:  # not answered here any more, or no other owner to share with: not due again
+            self.schedule.shared(w, time.monotonic() if now is None else now)
+        self.counters["shared_on_embedding"] += n
         return n
 
     # ownership ---------------------------------------------------------------------------------
@@ -562,15 +665,99 @@ class AgentDaemon:
         self._stopped_at[wid] = time.time()
 
     def _release(self, wid: str, why: str) -> None:
-        """Stop answering world `wid` (first), then withdraw the claim."""
+        """Stop answering world `wid` (first), give its lease back (if it is still there), then
+        withdraw the claim."""
         self._stop_answering(wid, why)
+        link = self.links.get(wid)
+        if link is not None and link.epoch > 0:
+            if wid in self.book.view().worlds and self.leases.release(wid, link.epoch):
+                log.info("owner %s gave world %s's lease (epoch %d) back", self.owner_id, wid, link.epoch)
+            link.set_lease(self.owner_id, 0)
+        self._waiting.pop(wid, None)
+        if self.schedule is not None:
+            self.schedule.forget(wid)
         held = self._claims.pop(wid, None)
         self._failed.discard(wid)
+        self._retry_spec.pop(wid, None)
         for sub in self._obs_subs.pop(wid, ()):
             self.bus.undeclare(sub)
         if held is not None:
             self.bus.undeclare(held[0])
             log.info("owner %s releases world %s: %s", self.owner_id, wid, why)
+
+    # leases (see agent.lease) ---------------------------------------------------------------------
+    LEASE_RETRY = 0.5  # seconds between two lease requests to a world whose lease another owner holds
+    SPEC_RETRY = 5.0  # seconds after which a claimed world whose spec query went unanswered is tried again
+
+    def _lease_get(self, key: str, payload: bytes, timeout: float) -> list[bytes]:
+        return [r.payload for r in self.bus.get(key, timeout=timeout, payload=payload)]
+
+    def _take_lease(self, wid: str) -> Outcome | None:
+        """Ask world `wid` for its lease: the outcome when granted, or for a world without leases
+        (answered unfenced, epoch 0); None when another owner holds it (this owner waits, reports it
+        once, and asks again every LEASE_RETRY seconds)."""
+        out = self.leases.acquire(wid)
+        if out.granted:
+            self.counters["lease_granted"] += 1
+            if self._waiting.pop(wid, None) is not None:
+                log.info("world %s: lease granted to %s (epoch %d) after waiting", wid, self.owner_id, out.epoch)
+            return out
+        if out.unfenced:
+            self.counters["unfenced"] += 1
+            log.warning(
+                "world %s answers no lease request (a world written before leases): answered unfenced, "
+                "only the claim protocol keeps a second owner away",
+                wid,
+            )
+            return out
+        self.counters["lease_refused"] += 1
+        first = wid not in self._waiting
+        self._waiting[wid] = time.monotonic()
+        if first:
+            what = f"held by {out.holder} (epoch {out.epoch})" if out.holder else f"not granted ({out.reason})"
+            log.info("world %s: lease %s; %s waits and asks again", wid, what, self.owner_id)
+            self.event(
+                wid,
+                EventKind.LEASE_REFUSED,
+                f"the world's lease is {what}; {self.owner_id} does not answer it and asks again",
+                out.reason or "held",
+            )
+        return None
+
+    def _handle_lost(self) -> None:
+        """The worlds whose lease this owner lost (their lease_lost events, seen on a bus thread,
+        paused the link at once): say so, and withdraw the claim; a world whose lease went to
+        another owner is not claimed again for a while, one whose lease is free (the world restarted
+        or nobody holds it) is claimed again at once."""
+        while True:
+            try:
+                wid, ev = self._lost.get_nowait()
+            except queue.Empty:
+                return
+            link = self.links.get(wid)
+            if link is None or link.epoch != ev.epoch:
+                continue  # already handled, or a newer lease since
+            self.counters["lease_lost"] += 1
+            if ev.holder:
+                detail = (
+                    f"world {wid} applies the actions of owner {ev.holder} (lease epoch {ev.holder_epoch}), not "
+                    f"those of {self.owner_id} (epoch {ev.epoch}): {self.owner_id} stopped answering it"
+                )
+            else:
+                detail = f"world {wid} has no lease holder now (it restarted or the lease was freed): asking again"
+            log.warning("%s", detail)
+            link.event(
+                EventKind.LEASE_LOST,
+                detail,
+                ev.step,
+                {"epoch": float(ev.epoch), "holder_epoch": float(ev.holder_epoch)},
+                reason="held" if ev.holder else "free",
+            )
+            link.set_lease(self.owner_id, 0)  # nothing to give back
+            self._release(wid, f"lease lost to {ev.holder or 'nobody'}")
+            if ev.holder:
+                self._elsewhere.add(wid)
+                self._avoid[wid] = time.monotonic() + 5.0
 
     def own(self) -> None:
         """One ownership tick: withdraw lost claims, hand one world off if overloaded, claim a free
@@ -606,6 +793,10 @@ class AgentDaemon:
             if "wins" in why:
                 self.counters["lost"] += 1
                 self._elsewhere.add(w)
+                link = self.links.get(w)
+                if link is not None and link.state == "attached":  # the winner resumes from here
+                    self._stop_answering(w, why)
+                    self.share(only=w)
             self._release(w, why)
         if p.shed is not None:
             self._last_shed = now
@@ -630,10 +821,17 @@ class AgentDaemon:
             link = self.links.get(w)
             if link is not None and link.state == "attached":
                 continue
+            if w in self._failed and now >= self._retry_spec.get(w, float("inf")):
+                self._failed.discard(w)  # no spec reply last time (a route being rebuilt?): once more
+                self._retry_spec.pop(w, None)
             if w in self._failed or any(o < self.owner_id for o in self.book.view().claimants(w)):
                 continue  # tried once this appearance / withdrawn at the next tick
+            if now - self._waiting.get(w, float("-inf")) < self.LEASE_RETRY:
+                continue  # its lease is held by another owner: ask again in a moment
             self._attach(w)
             link = self.links.get(w)
+            if w in self._waiting:
+                continue  # the world's lease is held elsewhere: keep the claim and ask again
             if link is None or link.state != "attached":
                 # keep the claim: the world is reported once (attach_failed), not by every owner in turn;
                 # it is tried again when it reappears
@@ -652,17 +850,25 @@ class AgentDaemon:
             self._attach_failed(wid, "bad_spec", e)
             return
         except (ValueError, BusError) as e:
+            if isinstance(e, BusError):
+                self._retry_spec[wid] = time.monotonic() + self.SPEC_RETRY
             self._attach_failed(wid, "no_spec", e)
             return
         if spec.program == EXTERNAL_PROGRAM:  # an outside controller answers it (a Gymnasium BusEnv)
             log.info("world %s is driven by an outside controller (program %r): not attached", wid, spec.program)
             self.event(wid, EventKind.ATTACH_FAILED, "the world is driven by an outside controller", "external")
             return
+        lease = self._take_lease(wid)
+        if lease is None:
+            return  # held by another live owner: the claim stays, own() asks again
+        epoch = lease.epoch if lease.granted else 0
         try:
             truth = self._fetch(keys.world_truth(wid), Truth, tries=1)
         except (BusError, ProtocolError):
             truth = None
         previous = self.links.get(wid)
+        if previous is not None:
+            previous.set_lease(self.owner_id, epoch)  # before it answers again
         if previous is not None and same_body(previous.spec, spec):
             # resume it, unless another owner answered the world since (its shared state is newer)
             restored = self._load_checkpoint(spec, newer_than=self._stopped_at.get(wid, time.time()))
@@ -677,11 +883,22 @@ class AgentDaemon:
             except ProtocolError as e:
                 log.warning("world %s: truth not used: %s", wid, e)
                 truth = None
+        last = self.store.last_published(wid)
         try:
-            att = attach(spec, self.config, self.publish, truth=truth, previous=previous, restored=restored)
+            att = attach(
+                spec,
+                self.config,
+                self.publish,
+                truth=truth,
+                previous=previous,
+                restored=restored,
+                last_published=last,
+            )
         except Exception as e:  # noqa: BLE001 - no program fits this spec (KeyError, MemoryError, ...); the daemon goes on
+            self.leases.release(wid, epoch)
             self._attach_failed(wid, "no_program", e)
             return
+        att.link.set_lease(self.owner_id, epoch)
         if previous is not None and att.link is not previous:
             previous.stop()
         self.links[wid] = att.link
@@ -766,6 +983,8 @@ class AgentDaemon:
             self.bus.subscribe(f"{keys.PREFIX}/world/*/truth", self._on_truth)
             self.bus.subscribe(keys.ALL_WORLD_EVENTS, self._on_world_event)
         self.bus.subscribe(keys.ALL_CHECKPOINTS, self._on_checkpoint)
+        self.bus.subscribe(keys.ALL_EMBEDDINGS, self._on_embedding)
+        self.bus.queryable(f"{keys.PREFIX}/agent/{self.owner_id}/checkpoint/*", self._answer_checkpoint)
         self.bus.token(keys.alive_agent(self.owner_id))
         self.bus.token(keys.alive_owner(self.owner_id))
         self.bus.watch_alive(keys.ALL_ALIVE_OWNERS, self._on_owner, history=True)
@@ -789,7 +1008,9 @@ class AgentDaemon:
             if wid is not None and not alive:
                 self._detach(wid)
             try:
+                self._handle_lost()
                 self.own()
+                self.share_new_versions()
             except Exception:  # noqa: BLE001 - one bad tick must not stop the daemon
                 if self.bus.closed:
                     break

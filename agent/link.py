@@ -9,7 +9,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -142,6 +142,8 @@ class WorldLink:
         self.version = 0
         self.state = "attached"
         self.session = spec.session
+        self.owner = ""  # the owner id and lease epoch every action carries (see agent.lease)
+        self.epoch = 0
         self.lock = threading.RLock()  # held while the program runs: checkpoints take it too
         self._last_step = -1
         self._last_action: Action | None = None
@@ -165,6 +167,15 @@ class WorldLink:
         self.inbox.close()
         if self._thread is not None:
             self._thread.join(timeout=5)
+
+    def set_lease(self, owner: str, epoch: int) -> None:
+        """Answer as `owner` under lease `epoch` from now on (0: unfenced); a resent observation
+        gets the same answer under the new epoch."""
+        with self.lock:
+            if (owner, epoch) != (self.owner, self.epoch):
+                self.owner, self.epoch = owner, epoch
+                if self._last_action is not None:
+                    self._last_action = replace(self._last_action, owner=owner, epoch=epoch)
 
     def pause(self) -> None:
         """Answer nothing until `resume` (the world vanished)."""
@@ -280,7 +291,16 @@ class WorldLink:
             if fallback is None:
                 return None
             dec = fallback
-        act = Action(self.world_id, obs.step, tuple(float(v) for v in dec.values), dec.reset, dec.start, time.time())
+        act = Action(
+            self.world_id,
+            obs.step,
+            tuple(float(v) for v in dec.values),
+            dec.reset,
+            dec.start,
+            time.time(),
+            self.owner,
+            self.epoch,
+        )
         self._last_step, self._last_action = obs.step, act
         self.publish("act", act)
         c = self.counters

@@ -561,9 +561,12 @@ class Bus:
         Raises
         ------
         BusError
-            If a queryable answered with an error; the message carries its text.
+            If a queryable answered with an error and none answered with a value; the message
+            carries the error's text. (A query that reaches one queryable along two routes can
+            get a value along one and a timeout error along the other: the value counts.)
         """
         out = []
+        error: str | None = None
         # every matching queryable answers (a wildcard gathers one reply per agent), none consolidated away
         replies = self._session.get(
             key,
@@ -575,10 +578,11 @@ class Bus:
         for reply in replies:
             if reply.ok is not None:
                 out.append(_message(reply.ok))
-            else:
+            elif error is None:
                 err = reply.err
-                detail = err.payload.to_bytes().decode(errors="replace") if err is not None else "empty reply"
-                raise BusError(f"query {key}: {detail}")
+                error = err.payload.to_bytes().decode(errors="replace") if err is not None else "empty reply"
+        if error is not None and not out:
+            raise BusError(f"query {key}: {error}")
         return out
 
     # liveliness --------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from google.protobuf.message import DecodeError
 
-from sensorimotor.protocol import errors
+from sensorimotor.protocol import errors, keys
 from sensorimotor.protocol import messages as m
 from sensorimotor.protocol import sme_v1_pb2 as pb
 
@@ -49,6 +49,8 @@ SCHEMA_NAMES = {
     m.AgentEvent: "sme.v1.AgentEvent",
     m.WorldEvent: "sme.v1.WorldEvent",
     m.AgentStatus: "sme.v1.AgentStatus",
+    m.LeaseRequest: "sme.v1.LeaseRequest",
+    m.Lease: "sme.v1.Lease",
 }
 
 
@@ -180,6 +182,8 @@ def _enc_act(x: m.Action) -> pb.Action:
         reset=x.reset,
         start=x.start,
         timestamp=x.timestamp,
+        owner=x.owner,
+        epoch=x.epoch,
     )
 
 
@@ -256,6 +260,37 @@ def _enc_world_event(x: m.WorldEvent) -> pb.WorldEvent:
         step=x.step,
         timestamp=x.timestamp,
         control_id=x.control_id,
+        owner=x.owner,
+        epoch=x.epoch,
+        holder=x.holder,
+        holder_epoch=x.holder_epoch,
+    )
+
+
+def _enc_lease_request(x: m.LeaseRequest) -> pb.LeaseRequest:
+    return pb.LeaseRequest(
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        owner=x.owner,
+        epoch=x.epoch,
+        release=x.release,
+        request_id=x.request_id,
+    )
+
+
+def _enc_lease(x: m.Lease) -> pb.Lease:
+    if math.isnan(x.ttl) or x.ttl < 0:
+        raise errors.NonFiniteValue(f"Lease ttl is {x.ttl!r}; a number >= 0 (inf: never) is expected")
+    return pb.Lease(
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        session=x.session,
+        holder=x.holder,
+        epoch=x.epoch,
+        granted=x.granted,
+        reason=x.reason,
+        ttl=x.ttl,
+        timestamp=x.timestamp,
     )
 
 
@@ -371,7 +406,8 @@ def _dec_act(p: pb.Action) -> m.Action:
     if len(p.values) > MAX_TENSORS:
         raise errors.OversizeMessage(f"Action has {len(p.values)} values, at most {MAX_TENSORS}")
     vals = tuple(_finite(v, f"Action(step={p.step}) value") for v in p.values)
-    return m.Action(p.world_id, p.step, vals, p.reset, p.start, p.timestamp)
+    _lease_id(p.owner, "Action owner", empty=True)
+    return m.Action(p.world_id, p.step, vals, p.reset, p.start, p.timestamp, p.owner, p.epoch)
 
 
 def _dec_ctl(p: pb.Control) -> m.Control:
@@ -421,7 +457,54 @@ def _dec_event(p: pb.AgentEvent) -> m.AgentEvent:
 
 
 def _dec_world_event(p: pb.WorldEvent) -> m.WorldEvent:
-    return m.WorldEvent(p.world_id, p.kind, p.reason, p.detail, p.step, p.session, p.timestamp, p.control_id)
+    return m.WorldEvent(
+        p.world_id,
+        p.kind,
+        p.reason,
+        p.detail,
+        p.step,
+        p.session,
+        p.timestamp,
+        p.owner,
+        p.epoch,
+        p.holder,
+        p.holder_epoch,
+        p.control_id,
+    )
+
+
+# Lease messages name owners and worlds: ids (see keys.check_id) or empty where the contract allows it.
+def _lease_id(value: str, what: str, empty: bool = False) -> str:
+    if (empty and value == "") or keys.is_id(value):
+        return value
+    raise errors.MalformedMessage(f"{what} {value[:80]!r} is not an id (1-64 of A-Z a-z 0-9 _ . -)")
+
+
+def _dec_lease_request(p: pb.LeaseRequest) -> m.LeaseRequest:
+    if len(p.request_id) > 64:
+        raise errors.MalformedMessage(f"LeaseRequest request_id is {len(p.request_id)} characters, at most 64")
+    return m.LeaseRequest(
+        _lease_id(p.world_id, "LeaseRequest world_id"),
+        _lease_id(p.owner, "LeaseRequest owner"),
+        p.epoch,
+        p.release,
+        p.request_id,
+    )
+
+
+def _dec_lease(p: pb.Lease) -> m.Lease:
+    if math.isnan(p.ttl) or p.ttl < 0:
+        raise errors.NonFiniteValue(f"Lease ttl is {p.ttl!r}; a number >= 0 (inf: never) is expected")
+    return m.Lease(
+        _lease_id(p.world_id, "Lease world_id"),
+        p.session,
+        _lease_id(p.holder, "Lease holder", empty=True),
+        p.epoch,
+        p.granted,
+        p.reason,
+        p.ttl,
+        p.timestamp,
+    )
 
 
 def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
@@ -456,6 +539,8 @@ _CODECS: dict[type, tuple[type, Callable[[Any], Any], Callable[[Any], Any]]] = {
     m.AgentEvent: (pb.AgentEvent, _enc_event, _dec_event),
     m.WorldEvent: (pb.WorldEvent, _enc_world_event, _dec_world_event),
     m.AgentStatus: (pb.AgentStatus, _enc_status, _dec_status),
+    m.LeaseRequest: (pb.LeaseRequest, _enc_lease_request, _dec_lease_request),
+    m.Lease: (pb.Lease, _enc_lease, _dec_lease),
 }
 
 

@@ -24,6 +24,11 @@ DEFAULT_AGENT_ID = "a0"
 _ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 
 
+def is_id(value: object) -> bool:
+    """Whether `value` is a valid id (1-64 characters from A-Z a-z 0-9 _ . -)."""
+    return isinstance(value, str) and _ID.fullmatch(value) is not None
+
+
 def check_id(value: str, what: str = "id") -> str:
     """Ids become key-expression chunks: refuse anything that could widen or break a key."""
     if not isinstance(value, str) or not _ID.fullmatch(value):  # fullmatch: "$" would let "g1\n" in
@@ -125,6 +130,22 @@ def world_event(world: str) -> str:
         The key expression.
     """
     return f"{PREFIX}/world/{world}/event"
+
+
+def world_lease(world: str) -> str:
+    """Key of a world's lease queryable: owners ask it for the lease (LeaseRequest -> Lease).
+
+    Parameters
+    ----------
+    world : str
+        The world id.
+
+    Returns
+    -------
+    str
+        The key expression.
+    """
+    return f"{PREFIX}/world/{world}/lease"
 
 
 def world_image(world: str, camera: str) -> str:

@@ -30,6 +30,8 @@ class EventKind(StrEnum):
     POLICY_ITERATION = "policy_iteration"
     EVALUATION = "evaluation"
     WORLD_EVENT = "world_event"  # a WorldEvent the agent saw, `reason` = its kind
+    LEASE_LOST = "lease_lost"  # the world applies another owner's actions now: this agent stopped answering it
+    LEASE_REFUSED = "lease_refused"  # the world's lease is held by another owner; this agent waits (`reason`: held)
 
 
 class Trigger(StrEnum):
@@ -57,6 +59,7 @@ class WorldEventKind(StrEnum):
     ACTION_REFUSED = "action_refused"  # the world could not apply an action; it reset the episode instead
     CONTROL_APPLIED = "control_applied"
     CONTROL_REFUSED = "control_refused"
+    LEASE_LOST = "lease_lost"  # an action whose owner/epoch is not the current lease was not applied
 
 
 @dataclass(frozen=True)
@@ -228,6 +231,10 @@ class Action:
         The start state of that episode (-1 for a random one).
     timestamp : float
         Seconds since the epoch.
+    owner : str
+        The owner id answering ("" from agents that predate leases).
+    epoch : int
+        The lease epoch that owner holds on the world (0: no lease).
     """
 
     world_id: str
@@ -236,6 +243,8 @@ class Action:
     reset: bool = False
     start: int = -1
     timestamp: float = 0.0
+    owner: str = ""
+    epoch: int = 0
 
 
 @dataclass(frozen=True)
@@ -431,6 +440,10 @@ class WorldEvent:
     control_id : int
         For ``control_applied`` / ``control_refused``: the `Control.id` answered (0: none), so the
         sender (`sme perturb`) knows which of its requests this is.
+    owner, epoch : str, int
+        Kind ``lease_lost``: the owner whose action was not applied and the epoch it carried.
+    holder, holder_epoch : str, int
+        Kind ``lease_lost``: the lease as it stands.
     """
 
     world_id: str
@@ -440,7 +453,67 @@ class WorldEvent:
     step: int = 0
     session: str = ""
     timestamp: float = 0.0
+    owner: str = ""
+    epoch: int = 0
+    holder: str = ""
+    holder_epoch: int = 0
     control_id: int = 0
+
+
+@dataclass(frozen=True)
+class LeaseRequest:
+    """An owner asks a world for its lease (or gives it back, `release`), on `.../lease`.
+
+    Attributes
+    ----------
+    world_id, owner : str
+        The world asked and the asking owner.
+    epoch : int
+        The epoch the asker holds (0: none); with `release`, the epoch given back.
+    release : bool
+        Give the lease back instead of asking for it.
+    request_id : str
+        Random per request: a second copy of the same request (a message can arrive twice, once
+        through each of two routers) gets the same answer instead of a second grant.
+    """
+
+    world_id: str
+    owner: str
+    epoch: int = 0
+    release: bool = False
+    request_id: str = ""
+
+
+@dataclass(frozen=True)
+class Lease:
+    """A world's answer to a `LeaseRequest`: its lease as it stands after the request.
+
+    Attributes
+    ----------
+    world_id, session : str
+        The world and its process's session (epochs count within one session).
+    holder : str
+        The owner whose actions are applied ("" while nobody holds the lease).
+    epoch : int
+        The current epoch; it only grows within a session.
+    granted : bool
+        Whether the asker holds the lease now.
+    reason : str
+        ``granted``, ``renewed``, ``held`` (another owner holds it), ``released``, ``not_holder``.
+    ttl : float
+        Seconds of silence after which a live holder's lease may be granted to another owner.
+    timestamp : float
+        Seconds since the epoch.
+    """
+
+    world_id: str
+    session: str
+    holder: str
+    epoch: int
+    granted: bool
+    reason: str = ""
+    ttl: float = 0.0
+    timestamp: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -90,7 +90,7 @@ RECEIVE = ["put", "delete", "reply", "liveliness_token"]
 
 # What each role may send to the router (ingress) beyond reading, and what it may receive (egress).
 WORLD_PUTS = [f"{W}/obs", f"{W}/truth", f"{W}/event", f"{W}/image/*"]
-WORLD_SERVES = [f"{W}/spec", f"{W}/truth"]
+WORLD_SERVES = [f"{W}/spec", f"{W}/truth", f"{W}/lease"]
 WORLD_READS = [f"{W}/act", f"{W}/ctl"]
 AGENT_PUTS = [
     f"{W}/act",
@@ -99,7 +99,7 @@ AGENT_PUTS = [
     f"{PREFIX}/agent/*/checkpoint/*",
 ]
 AGENT_TOKENS = [f"{PREFIX}/alive/agent/*", f"{PREFIX}/alive/owner/*", f"{PREFIX}/alive/claim/*/*"]
-AGENT_SERVES = [f"{PREFIX}/agent/*/status"]
+AGENT_SERVES = [f"{PREFIX}/agent/*/status", f"{PREFIX}/agent/*/checkpoint/*"]
 PERTURB_PUTS = [f"{W}/ctl"]
 
 
@@ -120,6 +120,14 @@ def acl_rules() -> dict[str, Any]:
         _rule("world-subscribes", ["declare_subscriber"], "ingress", WORLD_READS),
         _rule("world-receives", ["put", "delete"], "egress", WORLD_READS),
         _rule("world-is-queried", ["query"], "egress", WORLD_SERVES),
+        # the world follows the owners' tokens: a vanished lease holder's lease is free at once
+        _rule(
+            "world-watches-owners",
+            ["declare_liveliness_subscriber", "liveliness_query"],
+            "ingress",
+            [f"{PREFIX}/alive/owner/*"],
+        ),
+        _rule("world-sees-owners", ["liveliness_token", "reply"], "egress", [f"{PREFIX}/alive/owner/*"]),
         # agent (as a client or a peer router): reads everything, publishes its own outputs
         _rule("agent-reads", READ, "ingress", [ALL]),
         _rule("agent-receives", RECEIVE + ["query"], "egress", [ALL]),

@@ -112,7 +112,7 @@ class Observation(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., episode: _Optional[int] = ..., step: _Optional[int] = ..., t: _Optional[int] = ..., timestamp: _Optional[float] = ..., tensors: _Optional[_Iterable[_Union[Tensor, _Mapping]]] = ..., reward: _Optional[float] = ..., done: _Optional[bool] = ..., start: _Optional[int] = ..., session: _Optional[str] = ..., truncated: _Optional[bool] = ..., success: _Optional[bool] = ...) -> None: ...
 
 class Action(_message.Message):
-    __slots__ = ("schema_version", "world_id", "step", "values", "reset", "start", "timestamp")
+    __slots__ = ("schema_version", "world_id", "step", "values", "reset", "start", "timestamp", "owner", "epoch")
     SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
     WORLD_ID_FIELD_NUMBER: _ClassVar[int]
     STEP_FIELD_NUMBER: _ClassVar[int]
@@ -120,6 +120,8 @@ class Action(_message.Message):
     RESET_FIELD_NUMBER: _ClassVar[int]
     START_FIELD_NUMBER: _ClassVar[int]
     TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    OWNER_FIELD_NUMBER: _ClassVar[int]
+    EPOCH_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     world_id: str
     step: int
@@ -127,7 +129,9 @@ class Action(_message.Message):
     reset: bool
     start: int
     timestamp: float
-    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., step: _Optional[int] = ..., values: _Optional[_Iterable[float]] = ..., reset: _Optional[bool] = ..., start: _Optional[int] = ..., timestamp: _Optional[float] = ...) -> None: ...
+    owner: str
+    epoch: int
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., step: _Optional[int] = ..., values: _Optional[_Iterable[float]] = ..., reset: _Optional[bool] = ..., start: _Optional[int] = ..., timestamp: _Optional[float] = ..., owner: _Optional[str] = ..., epoch: _Optional[int] = ...) -> None: ...
 
 class Control(_message.Message):
     __slots__ = ("schema_version", "world_id", "kind", "params", "timestamp", "id")
@@ -279,7 +283,7 @@ class AgentEvent(_message.Message):
     def __init__(self, schema_version: _Optional[int] = ..., agent_id: _Optional[str] = ..., world_id: _Optional[str] = ..., kind: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., values: _Optional[_Mapping[str, float]] = ..., reason: _Optional[str] = ..., config: _Optional[_Union[AttachConfig, _Mapping]] = ...) -> None: ...
 
 class WorldEvent(_message.Message):
-    __slots__ = ("schema_version", "world_id", "session", "kind", "reason", "detail", "step", "timestamp", "control_id")
+    __slots__ = ("schema_version", "world_id", "session", "kind", "reason", "detail", "step", "timestamp", "control_id", "owner", "epoch", "holder", "holder_epoch")
     SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
     WORLD_ID_FIELD_NUMBER: _ClassVar[int]
     SESSION_FIELD_NUMBER: _ClassVar[int]
@@ -289,6 +293,10 @@ class WorldEvent(_message.Message):
     STEP_FIELD_NUMBER: _ClassVar[int]
     TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
     CONTROL_ID_FIELD_NUMBER: _ClassVar[int]
+    OWNER_FIELD_NUMBER: _ClassVar[int]
+    EPOCH_FIELD_NUMBER: _ClassVar[int]
+    HOLDER_FIELD_NUMBER: _ClassVar[int]
+    HOLDER_EPOCH_FIELD_NUMBER: _ClassVar[int]
     schema_version: int
     world_id: str
     session: str
@@ -298,7 +306,49 @@ class WorldEvent(_message.Message):
     step: int
     timestamp: float
     control_id: int
-    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., kind: _Optional[str] = ..., reason: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., control_id: _Optional[int] = ...) -> None: ...
+    owner: str
+    epoch: int
+    holder: str
+    holder_epoch: int
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., kind: _Optional[str] = ..., reason: _Optional[str] = ..., detail: _Optional[str] = ..., step: _Optional[int] = ..., timestamp: _Optional[float] = ..., control_id: _Optional[int] = ..., owner: _Optional[str] = ..., epoch: _Optional[int] = ..., holder: _Optional[str] = ..., holder_epoch: _Optional[int] = ...) -> None: ...
+
+class LeaseRequest(_message.Message):
+    __slots__ = ("schema_version", "world_id", "owner", "epoch", "release", "request_id")
+    SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
+    WORLD_ID_FIELD_NUMBER: _ClassVar[int]
+    OWNER_FIELD_NUMBER: _ClassVar[int]
+    EPOCH_FIELD_NUMBER: _ClassVar[int]
+    RELEASE_FIELD_NUMBER: _ClassVar[int]
+    REQUEST_ID_FIELD_NUMBER: _ClassVar[int]
+    schema_version: int
+    world_id: str
+    owner: str
+    epoch: int
+    release: bool
+    request_id: str
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., owner: _Optional[str] = ..., epoch: _Optional[int] = ..., release: _Optional[bool] = ..., request_id: _Optional[str] = ...) -> None: ...
+
+class Lease(_message.Message):
+    __slots__ = ("schema_version", "world_id", "session", "holder", "epoch", "granted", "reason", "ttl", "timestamp")
+    SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
+    WORLD_ID_FIELD_NUMBER: _ClassVar[int]
+    SESSION_FIELD_NUMBER: _ClassVar[int]
+    HOLDER_FIELD_NUMBER: _ClassVar[int]
+    EPOCH_FIELD_NUMBER: _ClassVar[int]
+    GRANTED_FIELD_NUMBER: _ClassVar[int]
+    REASON_FIELD_NUMBER: _ClassVar[int]
+    TTL_FIELD_NUMBER: _ClassVar[int]
+    TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    schema_version: int
+    world_id: str
+    session: str
+    holder: str
+    epoch: int
+    granted: bool
+    reason: str
+    ttl: float
+    timestamp: float
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., holder: _Optional[str] = ..., epoch: _Optional[int] = ..., granted: _Optional[bool] = ..., reason: _Optional[str] = ..., ttl: _Optional[float] = ..., timestamp: _Optional[float] = ...) -> None: ...
 
 class LinkStatus(_message.Message):
     __slots__ = ("world_id", "kind", "program", "state", "steps", "episodes", "embedding_version", "reward_mean", "rejected", "last_procrustes_error", "detector_statistic", "drops", "dropped")

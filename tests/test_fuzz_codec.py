@@ -40,6 +40,8 @@ from sensorimotor.protocol.messages import (
     Control,
     Embedding,
     EmbeddingScores,
+    Lease,
+    LeaseRequest,
     LinkStatus,
     Observation,
     SensorSpec,
@@ -53,7 +55,19 @@ FUZZ = settings(
     max_examples=200, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow], database=None
 )
 
-MESSAGES = [WorldSpec, Observation, Action, Control, Truth, Embedding, AgentEvent, WorldEvent, AgentStatus]
+MESSAGES = [
+    WorldSpec,
+    Observation,
+    Action,
+    Control,
+    Truth,
+    Embedding,
+    AgentEvent,
+    WorldEvent,
+    AgentStatus,
+    LeaseRequest,
+    Lease,
+]
 PB = {cls: getattr(pb, cls.__name__) for cls in MESSAGES}
 DTYPE_NAMES = sorted(codec.DTYPES)
 
@@ -139,7 +153,8 @@ world_specs = st.builds(
     text,
 )
 observations = st.builds(Observation, text, u64, u64, u32, tensors, finite, st.booleans(), i32, finite, text)
-actions = st.builds(Action, text, u64, st.lists(finite, max_size=8).map(tuple), st.booleans(), i32, finite)
+owners = st.just("") | ids  # an action's owner: empty (an agent before leases) or an id
+actions = st.builds(Action, text, u64, st.lists(finite, max_size=8).map(tuple), st.booleans(), i32, finite, owners, u64)
 controls = st.builds(Control, text, text, str_map, u64, finite)
 truths = st.builds(Truth, text, text, tensors, u64, finite)
 embeddings = st.builds(
@@ -172,7 +187,11 @@ agent_events = st.builds(
     text,
     st.none() | attach_configs,
 )
-world_events = st.builds(WorldEvent, text, text, text, text, u64, text, finite)
+world_events = st.builds(WorldEvent, text, text, text, text, u64, text, finite, text, u64, text, u64)
+lease_requests = st.builds(LeaseRequest, ids, ids, u64, st.booleans(), text)
+leases = st.builds(
+    Lease, ids, text, owners, u64, st.booleans(), text, st.floats(min_value=0.0) | st.just(math.inf), finite
+)
 link_statuses = st.builds(
     LinkStatus,
     text,
@@ -206,6 +225,8 @@ VALID = {
     AgentEvent: agent_events,
     WorldEvent: world_events,
     AgentStatus: agent_statuses,
+    LeaseRequest: lease_requests,
+    Lease: leases,
 }
 
 
@@ -306,6 +327,14 @@ def hostile_messages(draw: st.DrawFn, cls: type) -> bytes:
     for name in ("reward", "timestamp", "procrustes_error", "uptime", "reward_min", "reward_max"):
         if name in fields and draw(st.booleans()):
             setattr(p, name, draw(hostile_float))
+    hostile_id = st.sampled_from(["a", "", "a/b", "*", "a b", "x" * 65, "é"]) | text
+    if cls in (Action, LeaseRequest):
+        p.owner = draw(hostile_id)
+    if cls is LeaseRequest:
+        p.request_id = draw(st.sampled_from(["", "r1", "x" * 65]) | text)
+        p.epoch, p.release = draw(u64), draw(st.booleans())
+    if cls is Lease:
+        p.holder, p.ttl, p.epoch = draw(hostile_id), draw(hostile_float), draw(u64)
     if cls is Action:
         p.values.extend(draw(st.lists(hostile_float, max_size=3) | st.lists(finite, min_size=65, max_size=70)))
     if cls is AgentEvent:
@@ -370,6 +399,12 @@ def test_hostile_well_formed_messages_decode_or_raise_a_protocol_error(cls, data
         assert math.isfinite(msg.reward)
     if isinstance(msg, Action):
         assert all(math.isfinite(v) for v in msg.values) and len(msg.values) <= codec.MAX_TENSORS
+        assert msg.owner == "" or keys.is_id(msg.owner)
+    if isinstance(msg, LeaseRequest):
+        assert keys.is_id(msg.owner) and keys.is_id(msg.world_id) and len(msg.request_id) <= 64
+    if isinstance(msg, Lease):
+        assert (msg.holder == "" or keys.is_id(msg.holder)) and keys.is_id(msg.world_id)
+        assert msg.ttl >= 0 and not math.isnan(msg.ttl)
     if isinstance(msg, WorldSpec):
         assert len({s.name for s in msg.sensors}) == len(msg.sensors)
         assert all(math.isfinite(x) for x in msg.action_space.low + msg.action_space.high)

@@ -163,7 +163,9 @@ def test_a_world_written_from_the_protocol_page_is_learned_by_the_generic_progra
         ][-20:]
         fallback = [r for r in rows if r.get("kind") == "program_fallback"]
         # one fallback per attach (a hand-off to a worker attaches again), only for the world that asked
-        assert {r["world"] for r in fallback} == {"line-own"} and {r["reason"] for r in fallback} == {"outside-robot-v2"}
+        assert {r["world"] for r in fallback} == {"line-own"} and {r["reason"] for r in fallback} == {
+            "outside-robot-v2"
+        }
         attached = {r["world"]: r["config"]["program"] for r in rows if r.get("kind") == "attached"}
         assert attached == {"line-generic": "generic", "line-own": "generic"}
     finally:

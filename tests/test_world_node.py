@@ -45,6 +45,11 @@ def _serve(world, endpoint: str, **kw):
     return t, out
 
 
+def node_resends(out: dict) -> int:
+    node = out.get("node")
+    return node.stats.resends if node is not None else 0
+
+
 def test_each_answer_moves_one_step_and_stale_answers_are_ignored(endpoint):
     t, out = _serve(BenchWorld(obs_bytes=16), endpoint, resend=0.2)
     seen: list[int] = []
@@ -58,6 +63,9 @@ def test_each_answer_moves_one_step_and_stale_answers_are_ignored(endpoint):
 
         bus.subscribe(keys.world_obs("w"), on_obs)
         assert got.wait(10)  # observation 0, or its resend (it was published before we subscribed)
+        end = time.monotonic() + 10  # unanswered, it is resent (every 0.2 s): wait for one resend
+        while node_resends(out) < 1 and time.monotonic() < end:
+            time.sleep(0.02)
         for step in range(5):
             got.clear()
             pub.put(codec.encode(Action("w", step, (0.0,))))

@@ -53,6 +53,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="S",
         help="republish an unanswered observation after S seconds (default 0.5)",
     )
+    p.add_argument(
+        "--lease-ttl",
+        type=float,
+        default=1.5,
+        metavar="S",
+        help="seconds without an action from the lease holder after which another owner may get the "
+        "world's lease (default 1.5; a holder whose owner token vanishes loses it at once)",
+    )
     p.add_argument("--steps", type=int, default=None, help="stop after this many steps")
     p.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
     p.add_argument(
@@ -93,6 +101,9 @@ def main_args(args: argparse.Namespace) -> int:
     if not args.name:
         print("sme world: a world NAME is required (one of " + ", ".join(sorted(WORLDS)) + ")", file=sys.stderr)
         return 2
+    if not args.lease_ttl > 0:
+        print(f"sme world: --lease-ttl must be > 0 seconds, not {args.lease_ttl}", file=sys.stderr)
+        return 2
     try:
         params = assignments(args.param)
         world_kind(args.name)
@@ -123,6 +134,7 @@ def main_args(args: argparse.Namespace) -> int:
             measure=args.stats_json is not None,
             warmup=args.warmup,
             external=args.external,
+            lease_ttl=args.lease_ttl,
         )
         node.install_signal_handlers()
         stats = node.run()

@@ -596,7 +596,9 @@ class GymWorld(World):
             return u.gen_obs()
 
         self._set_start = set_state
-        return f"{len(self._starts)} starts: {len(cells)} free cells x {self.params.headings} heading(s), truth the cell"
+        return (
+            f"{len(self._starts)} starts: {len(cells)} free cells x {self.params.headings} heading(s), truth the cell"
+        )
 
     def _panda_starts(self) -> str:
         u: Any = self.u
@@ -697,7 +699,9 @@ class GymWorld(World):
             params["truth_dims"] = str(self._truth.shape[1])
         params.update({k: str(v) for k, v in self.env_kwargs.items()})
         params.update({f.name: str(getattr(self.params, f.name)).lower() for f in fields(GymWorldParams)})
-        params["max_episode_steps"] = str(self.max_episode_steps)  # the limit in force (the parameter's 0 means "the environment's")
+        params["max_episode_steps"] = str(
+            self.max_episode_steps
+        )  # the limit in force (the parameter's 0 means "the environment's")
         if self._box is not None:
             b = self._box
             action_space = ActionSpace(low=tuple(float(v) for v in b.low), high=tuple(float(v) for v in b.high))

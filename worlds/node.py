@@ -29,6 +29,8 @@ from sensorimotor.protocol.messages import (
     EXTERNAL_PROGRAM,
     Action,
     Control,
+    Lease,
+    LeaseRequest,
     Observation,
     Truth,
     WorldEvent,
@@ -36,6 +38,7 @@ from sensorimotor.protocol.messages import (
     WorldSpec,
 )
 from sensorimotor.worlds.base import PerturbationError, World
+from sensorimotor.worlds.lease import LeaseCounts, LeaseKeeper
 from sensorimotor.worlds.lockstep import Lockstep
 
 log = logging.getLogger("sme.world")
@@ -51,6 +54,10 @@ class NodeStats:
     published: int = 0  # observations put on the bus (resends included)
     actions_received: int = 0  # valid actions received (duplicates and stale ones included)
     actions_ignored: int = 0  # of those, answers to a step already answered or not the one awaited
+    # actions not from the current lease are not counted above: see `lease` (actions_fenced)
+    max_wait: float = 0.0  # longest time (s) an observation waited for its answer (the first one excepted)
+    max_wait_at: float = 0.0  # when (time.time()) that answer came
+    lease: LeaseCounts = field(default_factory=LeaseCounts)  # the lease keeper's counts (shared)
     rejected: dict[str, int] = field(default_factory=dict)
     controls: int = 0
     latencies: list[float] = field(default_factory=list)
@@ -70,7 +77,10 @@ class NodeStats:
             "actions_received": self.actions_received,
             "actions_ignored": self.actions_ignored,
             "controls": self.controls,
+            "max_wait_s": round(self.max_wait, 3),
+            "max_wait_at": round(self.max_wait_at, 3),
             "rejected": dict(self.rejected),
+            **self.lease.summary(),
             "seconds": round(self.seconds, 3),
             "steps_per_s": round(self.steps / self.seconds, 1) if self.seconds else 0.0,
         }
@@ -119,6 +129,9 @@ class WorldNode:
         Leave the world to an outside controller (a Gymnasium `BusEnv`): the spec says
         ``program: external`` (the world's own hint moves to ``params["program_hint"]``) and agents
         do not attach.
+    lease_ttl : float, default=1.5
+        Seconds without an action from the lease holder after which its lease may be granted to
+        another owner (see `worlds.lease`); a holder whose owner token vanishes loses it at once.
 
     Examples
     --------
@@ -142,6 +155,7 @@ class WorldNode:
         warmup: int = 0,
         image_every: int = 10,
         external: bool = False,
+        lease_ttl: float = 1.5,
     ) -> None:
         self.world = world
         self.bus = bus
@@ -154,6 +168,9 @@ class WorldNode:
         self.image_every = image_every
         self.session = secrets.token_hex(6)
         self.stats = NodeStats()
+        self.lease = LeaseKeeper(self.world_id, self.session, lease_ttl)
+        self._owner_lock = threading.Lock()
+        self.stats.lease = self.lease.counts
         self.stop_event = threading.Event()
         self._cv = threading.Condition()  # re-entrant: a signal handler may notify while run() holds it
         self._lock_step: Lockstep | None = None  # set while run() serves
@@ -186,6 +203,12 @@ class WorldNode:
             self._reject(e.kind, str(e))
             return
         with self._cv:
+            if not self.lease.admit(act, time.monotonic()):
+                lost = self.lease.lost_event(act, time.monotonic())
+                if lost is not None:
+                    log.info("world %s: %s", self.world_id, lost.detail)
+                    self._world_event(lost)
+                return
             self.stats.actions_received += 1
             lock = self._lock_step
             if lock is None or act.step != lock.step or self.stop_event.is_set():
@@ -213,6 +236,31 @@ class WorldNode:
         self._truth_bytes = (
             None if tr is None else codec.encode(replace(tr, world_id=self.world_id, timestamp=time.time()))
         )
+
+    def _answer_lease(self, key: str, payload: bytes | None) -> bytes:
+        """The lease queryable: a LeaseRequest in, the Lease as it stands after it out."""
+        try:
+            req = codec.decode(LeaseRequest, payload or b"")
+        except ProtocolError as e:
+            self._reject(e.kind, f"lease request: {e}")
+            raise
+        with self._cv:  # the lease is read by every action under the same lock
+            before = (self.lease.holder, self.lease.epoch)
+            lease = self.lease.request(req, time.monotonic())
+        if (lease.holder, lease.epoch) != before:
+            log.info(
+                "world %s: lease %s -> %s (epoch %d, %s)",
+                self.world_id,
+                before[0] or "-",
+                lease.holder or "-",
+                lease.epoch,
+                lease.reason,
+            )
+        return codec.encode(lease)
+
+    def _on_owner(self, key: str, alive: bool) -> None:
+        with self._owner_lock:  # not _cv: run() holds it while it declares this watch
+            self.lease.owner_alive(keys.last_chunk(key), alive)
 
     def _answer_truth(self, key: str, payload: bytes | None) -> bytes:
         if self._truth_bytes is None:
@@ -278,7 +326,10 @@ class WorldNode:
         st.episodes += lock.episode - episode
         st.steps += 1
         self._data = self._publish(lock)
-        self._sent = self._put_at = time.perf_counter()
+        now = time.perf_counter()
+        if st.steps > 1 and now - self._sent > st.max_wait:  # (the first waits for an agent to attach)
+            st.max_wait, st.max_wait_at = now - self._sent, time.time()
+        self._sent = self._put_at = now
         if (self.max_steps is not None and st.steps >= self.max_steps) or (
             self.seconds is not None and self._sent - self._t0 >= self.seconds
         ):
@@ -330,6 +381,7 @@ class WorldNode:
         bus = self.bus
         bus.queryable(keys.world_spec(wid), lambda k, p: spec_bytes, codec.schema_name(WorldSpec))
         bus.queryable(keys.world_truth(wid), self._answer_truth, codec.schema_name(Truth))
+        bus.queryable(keys.world_lease(wid), self._answer_lease, codec.schema_name(Lease))
         bus.subscribe(keys.world_act(wid), self._on_action)
         bus.subscribe(keys.world_ctl(wid), self._on_control)
         pub = bus.publisher(keys.world_obs(wid), codec.schema_name(Observation))
@@ -348,6 +400,9 @@ class WorldNode:
             self._data = self._publish(lock)
             self._sent = self._put_at = time.perf_counter()
             self._lock_step = lock
+            # the owners' tokens (a vanished lease holder loses its lease sooner); after the first
+            # observation, which nothing here needs to wait for
+            bus.watch_alive(keys.ALL_ALIVE_OWNERS, self._on_owner, history=True)
             while not self.stop_event.is_set():
                 self._cv.wait(max(self.resend - (time.perf_counter() - self._put_at), 0.001))
                 now = time.perf_counter()
