@@ -311,7 +311,7 @@ def test_agent_command_validates_before_the_bus_opens(monkeypatch, capsys):
 def test_documented_parameter_tables_equal_the_declarations():
     from sensorimotor.tools.params_doc import current_section, render_section
 
-    page = (ROOT / "docs" / "parameters.md").read_text()
+    page = (ROOT / "docs" / "worlds.md").read_text()
     assert current_section(page) == render_section(), (
         "docs/worlds.md drifted: run `python -m sensorimotor.tools.params_doc docs/worlds.md`"
     )
