@@ -56,6 +56,7 @@ SOURCES: dict[str, Source] = {
     ),
     "gridworld": Source("sme reproduce gridworld --runs 3", "gridworld/results.json", reproduce_table),
     "vergence-quick": Source("sme reproduce vergence --runs 2 --quick", "vergence-quick/results.json", reproduce_table),
+    "chapter9-quick": Source("sme reproduce chapter9 --quick", "chapter9-quick/results.json", reproduce_table),
     "objectpose": Source("sme reproduce objectpose --runs 5", "objectpose/results.json", reproduce_table),
     "rovingeye": Source("sme reproduce rovingeye --runs 5", "rovingeye/results.json", reproduce_table),
 }
