@@ -305,17 +305,17 @@ def test_agent_command_validates_before_the_bus_opens(monkeypatch, capsys):
     assert "retina: rule='fancy' is not one of basic, robust" in capsys.readouterr().err
 
 
-# the README ------------------------------------------------------------------------------------
+# the documentation -----------------------------------------------------------------------------
 
 
-def test_readme_parameter_tables_equal_the_declarations():
+def test_documented_parameter_tables_equal_the_declarations():
     from sensorimotor.tools.params_doc import current_section, render_section
 
-    readme = (ROOT / "README.md").read_text()
-    assert current_section(readme) == render_section(), (
-        "README parameter tables drifted: run `python -m sensorimotor.tools.params_doc README.md`"
+    page = (ROOT / "docs" / "worlds.md").read_text()
+    assert current_section(page) == render_section(), (
+        "docs/worlds.md drifted: run `python -m sensorimotor.tools.params_doc docs/worlds.md`"
     )
     for name in WORLDS:
-        assert f"`{name}`:" in readme
+        assert f"`{name}`:" in page
     for name in PROGRAMS:
-        assert f"`{name}`:" in readme
+        assert f"`{name}`:" in page

@@ -171,7 +171,7 @@ def main_args(args: argparse.Namespace) -> int:
                 return 1
             spec = _spec(bus, args.world)
             why = refuse_locally(spec.kind, ctl) if spec is not None else None
-            if why is not None and spec is not None:
+            if spec is not None and why is not None:
                 print(f"sme perturb: not sent: {why} (world {args.world} is a {spec.kind})", file=sys.stderr)
                 return 2
             bus.subscribe(keys.world_event(args.world), on_event)

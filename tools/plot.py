@@ -82,6 +82,7 @@ def plot_embedding(emb: Embedding, truth: Truth | None, out_dir: str) -> Plotted
     coords = np.asarray(emb.coordinates, dtype=np.float64)
     coords = coords.reshape(-1, 1) if coords.ndim == 1 else coords
     n = coords.shape[0]
+    size = float(np.clip(2500.0 / max(n, 1), 3.0, 28.0))  # many points: smaller markers
     pos = None
     if truth is not None and "positions" in truth.tensors and n >= 2:
         allpos = np.asarray(truth.tensors["positions"], dtype=np.float64)
@@ -95,7 +96,7 @@ def plot_embedding(emb: Embedding, truth: Truth | None, out_dir: str) -> Plotted
         colours = truth_colours(pos)
         d = pos.shape[1]
         ax = axes[0]
-        ax.scatter(pos[:, 0], pos[:, 1] if d > 1 else np.zeros(n), c=colours, s=28, edgecolors="none")
+        ax.scatter(pos[:, 0], pos[:, 1] if d > 1 else np.zeros(n), c=colours, s=size, edgecolors="none")
         ax.set_title(f"truth ({truth.kind or 'positions'}, {n} points)" if truth is not None else "truth")
         ax.set_aspect("equal", adjustable="datalim")
         ax = axes[1]
@@ -106,17 +107,17 @@ def plot_embedding(emb: Embedding, truth: Truth | None, out_dir: str) -> Plotted
         except ValueError:  # all points identical: nothing to align
             ref, aligned = pos, coords
         if one_d:
-            ax.scatter(ref[:, 0], aligned[:, 0], c=colours, s=28, edgecolors="none")
+            ax.scatter(ref[:, 0], aligned[:, 0], c=colours, s=size, edgecolors="none")
             ax.set_xlabel("truth (standardised)")
             ax.set_ylabel("embedding (aligned)")
         else:
-            ax.scatter(aligned[:, 0], aligned[:, 1], c=colours, s=28, edgecolors="none")
+            ax.scatter(aligned[:, 0], aligned[:, 1], c=colours, s=size, edgecolors="none")
             ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(f"embedding v{emb.version}, aligned, coloured by truth")
     else:
         colours = np.tile([0.2, 0.35, 0.7], (n, 1))
         ax = axes[0]
-        ax.scatter(coords[:, 0], coords[:, 1] if coords.shape[1] > 1 else np.zeros(n), c=colours, s=28)
+        ax.scatter(coords[:, 0], coords[:, 1] if coords.shape[1] > 1 else np.zeros(n), c=colours, s=size)
         ax.set_title(f"embedding v{emb.version} (no truth to colour by)")
     ax = axes[-1]
     eig = np.asarray(emb.eigenvalues, dtype=np.float64)

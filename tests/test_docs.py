@@ -1,0 +1,109 @@
+"""The documentation keeps its promises: every shell block either runs in a test (and says which)
+or says why it is not run; the blocks marked `run` are run here; the result tables and samples
+equal the files of the commands they cite (tools/results_doc.py)."""
+
+from __future__ import annotations
+
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = sorted(
+    [ROOT / "README.md", ROOT / "protocol" / "README.md"]
+    + [p for p in (ROOT / "docs").rglob("*.md") if "_build" not in p.parts and "_generated" not in p.parts]
+)
+SHELL = {"sh", "bash", "shell", "console", "zsh"}
+FENCE = re.compile(r"^(`{3,}|~{3,})\s*([\w-]*)")
+MARK = re.compile(r"^<!-- (tested|run|not run): (.+?) -->$")
+
+
+def shell_blocks(path: Path) -> list[tuple[int, list[str], re.Match[str] | None]]:
+    """(line number, lines, the marker before it or None) of every shell block of a page: fences
+    tagged sh/bash/shell/console, and untagged ones whose first line is a command."""
+    lines = path.read_text().split("\n")
+    out, i = [], 0
+    while i < len(lines):
+        m = FENCE.match(lines[i])
+        if not m:
+            i += 1
+            continue
+        fence, info = m.group(1), m.group(2)
+        j = i + 1
+        while j < len(lines) and not lines[j].startswith(fence):
+            j += 1
+        body = lines[i + 1 : j]
+        first = next((b.strip() for b in body if b.strip()), "")
+        if info in SHELL or (not info and re.match(r"^(\$ )?(sme|python3?(\.\d+)?|pip|\.venv/)\b", first)):
+            prev = next((lines[k].strip() for k in range(i - 1, -1, -1) if lines[k].strip()), "")
+            out.append((i + 1, body, MARK.match(prev)))
+        i = j + 1
+    return out
+
+
+BLOCKS = [(p, n, body, mark) for p in PAGES for n, body, mark in shell_blocks(p)]
+
+
+def _id(block) -> str:
+    return f"{block[0].relative_to(ROOT)}:{block[1]}"
+
+
+def test_the_pages_have_shell_blocks_to_check():
+    assert len(BLOCKS) >= 10 and any(m and m.group(1) == "run" for *_, m in BLOCKS)
+
+
+@pytest.mark.parametrize("block", BLOCKS, ids=_id)
+def test_every_shell_block_runs_in_a_test_or_says_why_not(block):
+    path, n, body, mark = block
+    assert mark, (
+        f"{path.relative_to(ROOT)}:{n}: a shell block without `<!-- tested: tests/FILE.py::TEST -->`, "
+        "`<!-- run: WHAT -->` or `<!-- not run: WHY -->` on the line before it"
+    )
+    if mark.group(1) == "tested":
+        ref = mark.group(2).split()[0]
+        file, _, name = ref.partition("::")
+        assert (ROOT / file).is_file(), ref
+        assert re.search(rf"^def {re.escape(name.split('[')[0])}\(", (ROOT / file).read_text(), re.M), ref
+
+
+def _commands(body: list[str]) -> list[list[str]]:
+    out = []
+    for line in body:
+        line = line.split(" #", 1)[0].strip().removeprefix("$ ")
+        if line:
+            argv = shlex.split(line)
+            assert argv[0] == "sme", f"a `run` block runs sme commands only: {line}"
+            out.append([sys.executable, "-m", "sensorimotor.tools.cli", *argv[1:]])
+    return out
+
+
+RUN = [b for b in BLOCKS if b[3] and b[3].group(1) == "run"]
+
+
+@pytest.mark.parametrize("block", RUN, ids=_id)
+def test_blocks_marked_run_run(block):
+    for argv in _commands(block[2]):
+        out = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, (argv, out.stderr[-2000:])
+
+
+def test_result_tables_and_samples_equal_their_sources():
+    from sensorimotor.tools.results_doc import SOURCES, main
+
+    assert main(["--check"]) == 0, "run `python -m sensorimotor.tools.results_doc` after refreshing a result"
+    pages = "".join(p.read_text() for p in PAGES)
+    for name in SOURCES:  # every source is shown somewhere
+        assert f"<!-- BEGIN results: {name} -->" in pages, name
+
+
+def test_the_readme_is_short_and_keeps_the_two_commands():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 200
+    assert "python3.11 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/sme demo" in text
+    ci = (ROOT / ".ci" / "run").read_text()
+    test_cmd = "python3.11 -m venv .venv && .venv/bin/pip install -e '.[test]' && .venv/bin/python -m pytest"
+    assert test_cmd in text and test_cmd in ci
