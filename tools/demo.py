@@ -157,7 +157,7 @@ def main_args(args: argparse.Namespace) -> int:
                     break
                 el = time.monotonic() - t0
                 if el >= seconds:
-                    can_embed = spec.n_starts >= 2 and not any(e.reason == "no_start_states" for e in events)
+                    can_embed = not any(e.reason == "no_start_states" for e in events)  # the retina embeds fields, not starts
                     if bounded or embeddings or not can_embed or el >= WAIT_FOR_FIRST:
                         break
                     if not told_wait:

@@ -83,7 +83,8 @@ def verdict(
     RunVerdict
     """
     embeddings = [e for e in embeddings if e.trigger != "policy_map"]
-    no_starts = (n_starts is not None and n_starts < 2) or any(ev.reason == "no_start_states" for ev in events)
+    # only the program knows whether it embeds start states (the retina embeds its receptive fields)
+    no_starts = any(ev.reason == "no_start_states" for ev in events)
     if not embeddings:
         if no_starts:
             return RunVerdict(
