@@ -157,7 +157,9 @@ def main_args(args: argparse.Namespace) -> int:
                     break
                 el = time.monotonic() - t0
                 if el >= seconds:
-                    can_embed = not any(e.reason == "no_start_states" for e in events)  # the retina embeds fields, not starts
+                    can_embed = not any(
+                        e.reason == "no_start_states" for e in events
+                    )  # the retina embeds fields, not starts
                     if bounded or embeddings or not can_embed or el >= WAIT_FOR_FIRST:
                         break
                     if not told_wait:
