@@ -84,6 +84,10 @@ class SarsaLambda:
         Probability of a random action in `act`.
     seed : int, default 0
         Seed of the learner's generator.
+    trace_cutoff : float, default 0.0
+        Eligibility traces below this are dropped, and only the live ones are updated (0: every
+        weight's trace is kept and decayed, the textbook form). With hashed tiles the weight table
+        is large (actions x memory) and decaying all of it every step costs more than the rest.
     """
 
     def __init__(
@@ -95,12 +99,14 @@ class SarsaLambda:
         lam: float = 0.9,
         epsilon: float = 0.0,
         seed: int = 0,
+        trace_cutoff: float = 0.0,
     ) -> None:
         if not 0 < alpha <= 1 or not 0 <= gamma <= 1 or not 0 <= lam <= 1 or not 0 <= epsilon <= 1:
             raise ValueError("need 0 < alpha <= 1 and gamma, lambda, epsilon in [0, 1]")
         self.coder, self.n_actions = coder, n_actions
         self.alpha, self.gamma, self.lam, self.epsilon = alpha, gamma, lam, epsilon
         self.seed = seed
+        self.trace_cutoff = trace_cutoff
         self.reset()
 
     def reset(self) -> None:
@@ -108,6 +114,7 @@ class SarsaLambda:
         self.rng = np.random.default_rng(self.seed)
         self.w = np.zeros((self.n_actions, self.coder.size))
         self.z = np.zeros_like(self.w)
+        self._live = np.zeros(0, dtype=np.int64)  # flat indices of the traces above the cutoff
 
     def state(self) -> dict[str, Any]:
         """Weights, eligibility traces and the generator (the tile coder and settings are configuration)."""
@@ -121,6 +128,7 @@ class SarsaLambda:
         self.seed = int(state["seed"])
         set_rng_state(self.rng, state["rng"])
         self.w, self.z = w, z
+        self._live = np.flatnonzero(z.reshape(-1)) if self.trace_cutoff > 0 else np.zeros(0, dtype=np.int64)
 
     def q(self, state: np.ndarray) -> np.ndarray:
         """Q(state, a) for every action: [n_actions]."""
@@ -163,7 +171,11 @@ class SarsaLambda:
 
     def begin_episode(self) -> None:
         """Clear the eligibility traces at the start of an episode."""
-        self.z[:] = 0.0
+        if self.trace_cutoff > 0:
+            self.z.reshape(-1)[self._live] = 0.0
+            self._live = np.zeros(0, dtype=np.int64)
+        else:
+            self.z[:] = 0.0
 
     def learn_one(self, s: np.ndarray, a: int, r: float, s2: np.ndarray, a2: int | None) -> None:
         """One Sarsa(lambda) update for the step (s, a, r, s2, a2).
@@ -184,7 +196,23 @@ class SarsaLambda:
         tiles = self.coder.active(s)
         target = r + (0.0 if a2 is None else self.gamma * self.q(s2)[a2])
         delta = target - self.w[a, tiles].sum()
+        if self.trace_cutoff > 0:
+            self._learn_sparse(tiles, a, delta)
+            return
         self.z *= self.gamma * self.lam
         self.z[:, tiles] = 0.0
         self.z[a, tiles] = 1.0  # replacing traces
         self.w += (self.alpha / self.coder.n_tilings) * delta * self.z
+
+    def _learn_sparse(self, tiles: np.ndarray, a: int, delta: float) -> None:
+        """The same update on the live traces only (see `trace_cutoff`)."""
+        z, w, size = self.z.reshape(-1), self.w.reshape(-1), self.coder.size
+        live = self._live
+        z[live] *= self.gamma * self.lam
+        touched = (np.arange(self.n_actions)[:, None] * size + tiles[None, :]).reshape(-1)
+        z[touched] = 0.0  # replacing traces: every action's trace of the active tiles is cleared
+        mine = a * size + tiles
+        z[mine] = 1.0
+        live = np.union1d(live[z[live] >= self.trace_cutoff], mine)
+        w[live] += (self.alpha / self.coder.n_tilings) * delta * z[live]
+        self._live = live

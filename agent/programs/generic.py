@@ -381,6 +381,7 @@ class GenericProgram(Program):
                 prm.lam,
                 prm.epsilon,
                 seed=int(self.rng.integers(2**31)),
+                trace_cutoff=1e-4,
             )
             basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
             # per-value ranges, measured over the first `sarsa_warmup` random steps: a sensor's one
