@@ -94,3 +94,30 @@ def test_a_script_that_never_closes_its_busenv_still_exits(procs, endpoint):
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and "done" in out.stdout, out.stderr
+
+
+@pytest.mark.parametrize(
+    ("world", "wid", "bar"),
+    [
+        # toy text whose goal is a terminal state (-1 a step): in-process 0.050 (`sme bench zoo`), +10 %
+        ("gym:CliffWalking-v1", "CliffWalking-v1", 0.055),
+        # Dict observations (two sensors over the wire), a table of distinct views: in-process 0.250, +10 %
+        ("gym:MiniGrid-Empty-8x8-v0", "MiniGrid-Empty-8x8-v0", 0.275),
+    ],
+)
+def test_zoo_worlds_reach_their_in_process_figures_over_the_bus(procs, endpoint, monkeypatch, world, wid, bar):
+    if "MiniGrid" in world:
+        pytest.importorskip("minigrid")
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
+    procs.start("agent", "--listen", endpoint, "-q")
+    procs.start("world", world, "--connect", endpoint, "-q")
+    seen: list[float] = []
+
+    def learned() -> bool:
+        link = world_link(agent_status(endpoint), wid)
+        if link is None or not link.embedding_version:
+            return False
+        seen.append(link.last_procrustes_error)
+        return link.last_procrustes_error <= bar
+
+    assert wait_for(learned, 120, every=0.5), seen[-5:]
