@@ -17,12 +17,13 @@ OUT/CHAPTER/results.json, table.md and PNG plots.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing as mp
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any, TypedDict
 
 import numpy as np
@@ -219,7 +220,31 @@ def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, m
     }
 
 
+#: where `_pool_map` runs jobs: None = this machine's process pool, else a Ray cluster's address
+#: (set by `--cluster` for one command; see `use_cluster`)
+_CLUSTER: list[str | None] = [None]
+
+
+@contextlib.contextmanager
+def use_cluster(address: str | None) -> Iterator[None]:
+    """Within the block, every chapter's jobs run on the Ray cluster at `address` (None: the local
+    process pool)."""
+    before = _CLUSTER[0]
+    _CLUSTER[0] = address
+    try:
+        yield
+    finally:
+        _CLUSTER[0] = before
+
+
 def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
+    """``[fn(*job) for job in jobs]`` in job order: on the Ray cluster of `use_cluster`, else in
+    `workers` spawned processes (in this process when 1). Jobs are seeded by their arguments, so
+    every way gives the same results."""
+    if _CLUSTER[0] is not None:
+        from sensorimotor.tools.ray_map import ray_map
+
+        return ray_map(fn, jobs, _CLUSTER[0])
     if workers <= 1:
         return [fn(*j) for j in jobs]
     with mp.get_context("spawn").Pool(workers) as pool:
@@ -627,6 +652,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes")
     p.add_argument("--out", default="out", help="output folder (default ./out)")
     p.add_argument(
+        "--cluster",
+        default=None,
+        metavar="ADDRESS",
+        help="run the seeded jobs as tasks on the Ray cluster at ADDRESS (HOST:PORT of its head, ray://HOST:10001, "
+        "or auto; needs the 'cluster' extra); default: --workers local processes",
+    )
+    p.add_argument(
         "--scene",
         choices=("wall", "natural"),
         default="wall",
@@ -653,12 +685,16 @@ def main_args(args: argparse.Namespace) -> int:
     out = os.path.join(args.out, name)
     os.makedirs(out, exist_ok=True)
     t0 = time.time()
+    where = f"{args.workers} workers" if getattr(args, "cluster", None) is None else f"Ray cluster {args.cluster}"
     print(
-        f"sme reproduce {name}: {args.runs} runs{' (quick)' if args.quick else ''}, "
-        f"{args.workers} workers, writing {out}/ ...",
+        f"sme reproduce {name}: {args.runs} runs{' (quick)' if args.quick else ''}, {where}, writing {out}/ ...",
         flush=True,
     )
-    res = chapter_fn(args.runs, args.quick, args.workers, out)
+    cluster = getattr(args, "cluster", None)
+    if cluster is not None:
+        require("ray", package="ray", extra="cluster")  # say so now, not after the first chapter's set-up
+    with use_cluster(cluster):
+        res = chapter_fn(args.runs, args.quick, args.workers, out)
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(res, f, default=float)
     with open(os.path.join(out, "table.md"), "w") as f:
