@@ -52,9 +52,10 @@ def candidates(params: dict[str, Any] | None = None, kswin: bool = False) -> dic
     drift = require("river.drift", package="river")
     prm = dict(params or {})
 
-    out: dict[str, Callable[[], _Detector]] = {
-        name: (lambda name=name: make_detector(name, **prm)) for name in DETECTORS
-    }
+    def ours(name: str) -> Callable[[], _Detector]:
+        return lambda: make_detector(name, **prm)
+
+    out: dict[str, Callable[[], _Detector]] = {name: ours(name) for name in DETECTORS}
     out["river.ADWIN"] = lambda: _River(drift.ADWIN, "river.ADWIN")
     out["river.PageHinkley(down)"] = lambda: _River(lambda: drift.PageHinkley(mode="down"), "river.PageHinkley")
     if kswin:
