@@ -128,3 +128,24 @@ def test_report_html_opens_in_headless_chromium_with_every_figure(tiny_report, t
     pixels = matplotlib.image.imread(str(shot))
     assert pixels.std() > 0.05  # not a blank page
     assert os.path.getsize(shot) > 10_000
+
+
+def test_report_only_judges_the_results_again_without_running(tiny_report, tmp_path):
+    _, out = tiny_report
+    before = (out / "report.md").read_text()
+    with open(out / "run.json") as f:
+        meta = json.load(f)
+    assert meta["chapters"]["broken"]["error"] and meta["total"] > 0
+    (out / "report.md").unlink()
+    mp = pytest.MonkeyPatch()
+    mp.setitem(reproduce.ALL, "broken", broken)
+    mp.setitem(report.CHAPTER_ROWS, "broken", ("A chapter that fails", lambda res, quick: []))
+    try:
+        args = ["reproduce", "all", "--quick", "--runs", "2", "--chapters", "gridworld,broken", "--out", str(out)]
+        assert main([*args, "--report-only"]) == 0
+    finally:
+        mp.undo()
+    after = (out / "report.md").read_text()
+    table = [line for line in before.splitlines() if line.startswith("| ")]
+    assert table == [line for line in after.splitlines() if line.startswith("| ")]
+    assert "this chapter is broken on purpose" in after

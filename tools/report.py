@@ -66,18 +66,27 @@ def fmt(ci: tuple[float, float], digits: int = 3) -> str:
 
 
 def _at_most(ci: tuple[float, float], target: float, tol: float = 0.0) -> tuple[str, str]:
-    """Lower is better: met when the interval reaches `target * (1 + tol)` or below."""
+    """Lower is better: met when our mean is at most `target * (1 + tol)`; the reason says where
+    the interval lies (a wide interval alone never meets a claim)."""
     bound = target * (1 + tol)
-    if ci[0] - ci[1] <= bound:
-        return MET, f"mean {ci[0]:.4g}, interval reaches {bound:.4g} or below"
-    return NOT_MET, f"the whole interval is above {bound:.4g} (lower bound {ci[0] - ci[1]:.4g})"
+    lo, hi = ci[0] - ci[1], ci[0] + ci[1]
+    if ci[0] <= bound:
+        sure = "the whole interval too" if hi <= bound else f"the interval reaches {hi:.4g}"
+        return MET, f"mean {ci[0]:.4g} at most {bound:.4g} ({sure})"
+    if lo <= bound:
+        return NOT_MET, f"mean {ci[0]:.4g} above {bound:.4g}, though the interval reaches {lo:.4g}"
+    return NOT_MET, f"the whole interval is above {bound:.4g} (lower bound {lo:.4g})"
 
 
 def _at_least(ci: tuple[float, float], target: float) -> tuple[str, str]:
-    """Higher is better: met when the interval reaches `target` or above."""
-    if ci[0] + ci[1] >= target:
-        return MET, f"mean {ci[0]:.4g}, interval reaches {target:.4g} or above"
-    return NOT_MET, f"the whole interval is below {target:.4g} (upper bound {ci[0] + ci[1]:.4g})"
+    """Higher is better: met when our mean is at least `target` (the reason says where the interval lies)."""
+    lo, hi = ci[0] - ci[1], ci[0] + ci[1]
+    if ci[0] >= target:
+        sure = "the whole interval too" if lo >= target else f"the interval reaches {lo:.4g}"
+        return MET, f"mean {ci[0]:.4g} at least {target:.4g} ({sure})"
+    if hi >= target:
+        return NOT_MET, f"mean {ci[0]:.4g} below {target:.4g}, though the interval reaches {hi:.4g}"
+    return NOT_MET, f"the whole interval is below {target:.4g} (upper bound {hi:.4g})"
 
 
 def _lower(a: tuple[float, float], b: tuple[float, float], what: str) -> tuple[str, str]:

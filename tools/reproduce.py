@@ -693,6 +693,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="LIST",
         help=f"all only: the chapters to run, comma-separated (default every one: {','.join(ALL)})",
     )
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="all only: run nothing; judge the results.json already in --out again and rewrite the report",
+    )
     p.set_defaults(func=main_args)
 
 
@@ -717,17 +722,93 @@ def _where(args: argparse.Namespace) -> str:
     return f"{args.workers} workers" if cluster is None else f"Ray cluster {cluster}"
 
 
-def main_all(args: argparse.Namespace) -> int:
-    """`sme reproduce all`: every chapter in turn (a failure is recorded and the rest run), then the report."""
+def _header(args: argparse.Namespace, names: list[str], chapters: list[Any], total: float | None) -> dict[str, str]:
+    from sensorimotor.tools import report
+
+    env = report.environment(os.path.dirname(os.path.abspath(__file__)))
+
+    def secs(x: float | None) -> str:
+        return "?" if x is None or x != x else f"{x:.0f} s"
+
+    return {
+        "command": f"sme reproduce all --runs {args.runs}{' --quick' if args.quick else ''}"
+        + (f" --chapters {','.join(names)}" if getattr(args, "chapters", None) else ""),
+        "seeds": f"0..{args.runs - 1} per condition"
+        + (" (chapter9 --quick: at most 5)" if "chapter9" in names else ""),
+        "wall time": ("?" if total is None else f"{total:.0f} s ({total / 60:.1f} min)")
+        + ", "
+        + ", ".join(f"{c.name} {secs(c.seconds)}" for c in chapters),
+        "executed on": _where(args),
+        "machine": f"{env.pop('host', '?')}, {env.pop('platform', '?')}, {env.pop('cpus', '?')} CPUs",
+        "versions": ", ".join(f"{k} {v}" for k, v in env.items()),
+    }
+
+
+def _chapter_report(name: str, res: dict, out: str, seconds: float, quick: bool) -> Any:
     import glob
-    import traceback
 
     from sensorimotor.tools import report
 
+    rows = report.chapter_rows(name, res, quick)
+    figures = sorted(glob.glob(os.path.join(out, "*.png")))
+    return report.ChapterReport(
+        name, report.CHAPTER_ROWS[name][0], seconds, rows, figures, table=res.get("markdown", "")
+    )
+
+
+def _names(args: argparse.Namespace) -> list[str] | None:
     names = list(ALL) if not getattr(args, "chapters", None) else [c.strip() for c in args.chapters.split(",")]
     unknown = [c for c in names if c not in ALL]
     if unknown or not names:
         print(f"sme reproduce: unknown chapter(s) {', '.join(unknown)}; valid: {', '.join(ALL)}", file=sys.stderr)
+        return None
+    return names
+
+
+def report_only(args: argparse.Namespace) -> int:
+    """`sme reproduce all --report-only`: judge the chapters' results.json in OUT again and rewrite the
+    report (wall times from OUT/run.json when the run wrote one, else unknown)."""
+    from sensorimotor.tools import report
+
+    names = _names(args)
+    if names is None:
+        return 2
+    meta: dict[str, Any] = {}
+    if os.path.exists(os.path.join(args.out, "run.json")):
+        with open(os.path.join(args.out, "run.json")) as f:
+            meta = json.load(f)
+    chapters = []
+    for name in names:
+        out = os.path.join(args.out, name)
+        info = meta.get("chapters", {}).get(name, {})
+        seconds = info.get("seconds", float("nan"))
+        if info.get("error"):
+            chapters.append(report.ChapterReport(name, report.CHAPTER_ROWS[name][0], seconds, error=info["error"]))
+            continue
+        try:
+            with open(os.path.join(out, "results.json")) as f:
+                res = json.load(f)
+        except (OSError, ValueError) as e:
+            chapters.append(
+                report.ChapterReport(name, report.CHAPTER_ROWS[name][0], seconds, error=f"no results to judge: {e}")
+            )
+            continue
+        chapters.append(_chapter_report(name, res, out, seconds, args.quick))
+    md, page = report.write_report(chapters, _header(args, names, chapters, meta.get("total")), args.out)
+    print(f"{md} and {page} rewritten from the results in {args.out}/")
+    return 0
+
+
+def main_all(args: argparse.Namespace) -> int:
+    """`sme reproduce all`: every chapter in turn (a failure is recorded and the rest run), then the report."""
+    import traceback
+
+    from sensorimotor.tools import report
+
+    if getattr(args, "report_only", False):
+        return report_only(args)
+    names = _names(args)
+    if names is None:
         return 2
     os.makedirs(args.out, exist_ok=True)
     t_all = time.time()
@@ -737,6 +818,12 @@ def main_all(args: argparse.Namespace) -> int:
         flush=True,
     )
     chapters: list[report.ChapterReport] = []
+    meta: dict[str, Any] = {"chapters": {}, "total": None}
+
+    def save_meta() -> None:  # after every chapter: a run cut short still leaves its times
+        with open(os.path.join(args.out, "run.json"), "w") as f:
+            json.dump(meta, f)
+
     for i, name in enumerate(names, 1):
         title = report.CHAPTER_ROWS[name][0]
         print(f"[{i}/{len(names)}] {name}: {title} ...", flush=True)
@@ -746,32 +833,25 @@ def main_all(args: argparse.Namespace) -> int:
         except Exception:  # one chapter's failure must not lose the others: it goes into the report
             err = traceback.format_exc()
             chapters.append(report.ChapterReport(name, title, time.time() - t0, error=err))
+            meta["chapters"][name] = {"seconds": time.time() - t0, "error": err}
+            save_meta()
             print(
                 f"[{i}/{len(names)}] {name} FAILED after {time.time() - t0:.0f} s: {err.strip().splitlines()[-1]}",
                 flush=True,
             )
             continue
-        rows = report.chapter_rows(name, res, args.quick)
-        figures = sorted(glob.glob(os.path.join(out, "*.png")))
-        chapters.append(report.ChapterReport(name, title, seconds, rows, figures, table=res.get("markdown", "")))
+        chapters.append(_chapter_report(name, res, out, seconds, args.quick))
+        meta["chapters"][name] = {"seconds": seconds, "error": None}
+        save_meta()
+        rows = chapters[-1].rows
         verdicts = ", ".join(
             f"{sum(r.verdict == v for r in rows)} {v}" for v in (report.MET, report.NOT_MET, report.NOT_COMPARABLE)
         )
         print(f"[{i}/{len(names)}] {name} done in {seconds:.0f} s: {verdicts}", flush=True)
     total = time.time() - t_all
-    env = report.environment(os.path.dirname(os.path.abspath(__file__)))
-    header = {
-        "command": f"sme reproduce all --runs {args.runs}{' --quick' if args.quick else ''}"
-        + (f" --chapters {','.join(names)}" if getattr(args, "chapters", None) else ""),
-        "seeds": f"0..{args.runs - 1} per condition"
-        + (" (chapter9 --quick: at most 5)" if "chapter9" in names else ""),
-        "wall time": f"{total:.0f} s ({total / 60:.1f} min), "
-        + ", ".join(f"{c.name} {c.seconds:.0f} s" for c in chapters),
-        "executed on": _where(args),
-        "machine": f"{env.pop('host', '?')}, {env.pop('platform', '?')}, {env.pop('cpus', '?')} CPUs",
-        "versions": ", ".join(f"{k} {v}" for k, v in env.items()),
-    }
-    md, page = report.write_report(chapters, header, args.out)
+    meta["total"] = total
+    save_meta()
+    md, page = report.write_report(chapters, _header(args, names, chapters, total), args.out)
     print(f"\n({total:.0f} s; {md} and {page})")
     return 1 if any(c.error for c in chapters) else 0
 
@@ -787,8 +867,8 @@ def main_args(args: argparse.Namespace) -> int:
     if scene != "wall" and args.chapter != "retina":
         print("sme reproduce: --scene applies to the retina chapter only", file=sys.stderr)
         return 2
-    if getattr(args, "chapters", None) and args.chapter != "all":
-        print("sme reproduce: --chapters applies to `all` only", file=sys.stderr)
+    if (getattr(args, "chapters", None) or getattr(args, "report_only", False)) and args.chapter != "all":
+        print("sme reproduce: --chapters and --report-only apply to `all` only", file=sys.stderr)
         return 2
     if args.chapter == "all":
         return main_all(args)
