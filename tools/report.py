@@ -414,6 +414,11 @@ def environment(root: str) -> dict[str, str]:
 # --- writing ------------------------------------------------------------------------------------------
 
 
+def _secs(x: float) -> str:
+    """A wall time for a heading: ``12 s``, or ``time unknown`` (a report rebuilt without run.json)."""
+    return "time unknown" if x != x else f"{x:.0f} s"
+
+
 def _md_cell(s: str) -> str:
     return s.replace("|", "\\|").replace("\n", " ")
 
@@ -432,7 +437,7 @@ def markdown(chapters: list[ChapterReport], header: dict[str, str], out: str) ->
         "",
     ]
     for c in chapters:
-        lines += [f"## {c.title} (`{c.name}`, {c.seconds:.0f} s)", ""]
+        lines += [f"## {c.title} (`{c.name}`, {_secs(c.seconds)})", ""]
         if c.error:
             lines += ["**This chapter failed**; the others ran:", "", "```", c.error.rstrip(), "```", ""]
             continue
@@ -517,7 +522,7 @@ def html_report(chapters: list[ChapterReport], header: dict[str, str]) -> str:
     parts += [f"<li><b>{e(k)}</b>: {e(v)}</li>" for k, v in header.items()]
     parts.append("</ul>")
     for c in chapters:
-        parts.append(f"<h2 id='{e(c.name)}'>{e(c.title)} (<code>{e(c.name)}</code>, {c.seconds:.0f} s)</h2>")
+        parts.append(f"<h2 id='{e(c.name)}'>{e(c.title)} (<code>{e(c.name)}</code>, {_secs(c.seconds)})</h2>")
         if c.error:
             parts.append(f"<p class='notmet'>This chapter failed; the others ran.</p><pre>{e(c.error)}</pre>")
             continue
