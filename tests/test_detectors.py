@@ -81,3 +81,44 @@ def test_bad_values_and_names():
         make_detector("magic")
     with pytest.raises(ValueError):
         CUSUM(h=0)
+
+
+def test_field_scores_of_the_bench_count_delay_misses_and_false_alarms():
+    pytest.importorskip("river")
+    from sensorimotor.tools.bench.detectors import WorldStream, field_rows, field_table, score_stream
+
+    rng = np.random.default_rng(0)
+    big = [WorldStream("w", "drop", s, stream(s, pre=2000, post=300, drop=4.0), 2000, {}, "step") for s in range(3)]
+    flat = rng.normal(0.0, 1.0, 1000)
+    none = [WorldStream("w", "flat", 0, flat, None, {}, "step")]
+    rows = {(r.perturbation, r.detector): r for r in field_rows(big + none)}
+    cusum = rows[("drop", "cusum")]
+    assert cusum.seeds == 3 and cusum.missed_ratio == 0.0 and cusum.unit == "step"
+    # the mean time to detect is the mean of the per-stream delays of the first alarm after the change
+    delays = [score_stream(lambda: make_detector("cusum"), s.values, 2000)[1] for s in big]
+    assert all(d is not None and d < 20 for d in delays)
+    assert cusum.mean_time_to_detect == pytest.approx(np.mean(delays))
+    assert cusum.drop_sd == pytest.approx(4.0, abs=0.3)
+    assert {d for _, d in rows} >= {"cusum", "river.ADWIN", "river.PageHinkley(down)", "river.KSWIN"}
+    flat_row = rows[("flat", "cusum")]  # no change: only false alarms, over the whole stream
+    d = make_detector("cusum")  # a fresh detector per stream
+    alarms = sum(bool(d.update(v)) for v in flat)
+    assert flat_row.missed_ratio is None and flat_row.mean_time_to_detect is None
+    assert flat_row.false_alarms_per_10k == pytest.approx(round(alarms / 0.1, 2))
+    assert "| w | drop | cusum |" in field_table(list(rows.values()))
+
+
+def test_world_stream_of_the_gridworld_has_no_change_and_bench_cli_writes_the_table(tmp_path, capsys):
+    pytest.importorskip("river")
+    from sensorimotor.tools.bench.detectors import WORLD_BENCHES, world_stream
+    from sensorimotor.tools.cli import main
+
+    st = world_stream("gridworld", WORLD_BENCHES["gridworld"].perturbations[0], 0, quick=True)
+    assert st.change is None and st.values.size > 100 and np.all((st.values >= 0) & (st.values <= 1))
+    out = tmp_path / "field.md"
+    args = ["bench", "detectors", "--quick", "--seeds", "2", "--worlds", "gridworld", "--world-seeds", "1"]
+    assert main([*args, "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "| gridworld | none (accepts none) | cusum | n/a | n/a |" in text
+    assert main(["bench", "detectors", "--worlds", "nowhere"]) == 2
+    assert "unknown world(s) nowhere" in capsys.readouterr().err

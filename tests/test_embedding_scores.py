@@ -129,3 +129,22 @@ def test_the_link_publishes_the_scores_in_the_embedding_message():
     (plain,) = [m for ch, m in untruthful if ch == "embedding"]
     assert plain.scores is None and plain.procrustes_error is None
     assert embedding_scores(EmbeddingOutput(Trigger.PERIODIC, (0, 9), np.zeros((2, 1)), (1.0,), 0), truth) is None
+
+
+def test_sme_watch_shows_the_scores():
+    from sensorimotor.protocol.messages import EmbeddingScores
+    from sensorimotor.tools.common import embedding_dict, format_embedding
+
+    e = Embedding("a0", "w", 3, "periodic", (0, 1, 2), np.zeros((3, 1)), (1.0,), 0.01)
+    assert "T=" not in format_embedding(e) and embedding_dict(e)["scores"] is None
+    s = EmbeddingScores(0.95, 0.9, 0.125, 0.0625, 1, 3)
+    scored = Embedding("a0", "w", 3, "periodic", (0, 1, 2), np.zeros((3, 1)), (1.0,), 0.01, scores=s)
+    assert "T=0.950 C=0.900 Dm=0.125 Dt=0.0625" in format_embedding(scored)
+    assert embedding_dict(scored)["scores"] == {
+        "trustworthiness": 0.95,
+        "continuity": 0.9,
+        "metric_dissimilarity": 0.125,
+        "topological_dissimilarity": 0.0625,
+        "n_neighbors": 1,
+        "n_points": 3,
+    }

@@ -17,12 +17,13 @@ OUT/CHAPTER/results.json, table.md and PNG plots.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing as mp
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any, TypedDict
 
 import numpy as np
@@ -219,7 +220,31 @@ def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, m
     }
 
 
+#: where `_pool_map` runs jobs: None = this machine's process pool, else a Ray cluster's address
+#: (set by `--cluster` for one command; see `use_cluster`)
+_CLUSTER: list[str | None] = [None]
+
+
+@contextlib.contextmanager
+def use_cluster(address: str | None) -> Iterator[None]:
+    """Within the block, every chapter's jobs run on the Ray cluster at `address` (None: the local
+    process pool)."""
+    before = _CLUSTER[0]
+    _CLUSTER[0] = address
+    try:
+        yield
+    finally:
+        _CLUSTER[0] = before
+
+
 def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
+    """``[fn(*job) for job in jobs]`` in job order: on the Ray cluster of `use_cluster`, else in
+    `workers` spawned processes (in this process when 1). Jobs are seeded by their arguments, so
+    every way gives the same results."""
+    if _CLUSTER[0] is not None:
+        from sensorimotor.tools.ray_map import ray_map
+
+        return ray_map(fn, jobs, _CLUSTER[0])
     if workers <= 1:
         return [fn(*j) for j in jobs]
     with mp.get_context("spawn").Pool(workers) as pool:
@@ -615,24 +640,220 @@ CHAPTERS = {
 }
 
 
+def retina_natural(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.retina_natural import chapter
+
+    return chapter(runs, quick, workers, out)
+
+
+#: the chapters of `sme reproduce all`, in the dissertation's order (4, 4 natural, 5, 5.2, 6, 7, 8, 9)
+ALL: dict[str, Callable[[int, bool, int, str], dict]] = {
+    "retina": retina,
+    "retina-natural": retina_natural,
+    "gridworld": gridworld,
+    "rovingeye": rovingeye,
+    "objectpose": objectpose,
+    "vergence": vergence,
+    "mountaincar": mountaincar,
+    "chapter9": chapter9,
+}
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
-        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, objectpose, rovingeye, chapter9)",
-        description=__doc__,
+        help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, objectpose, rovingeye, "
+        "chapter9), or all of them into one report",
+        description=__doc__
+        + "\n`all` runs every chapter (retina, retina-natural, gridworld, rovingeye, objectpose, vergence, mountaincar, "
+        "chapter9) and writes OUT/report.md and OUT/report.html: each claim of the dissertation beside ours with a "
+        "95 % CI and a verdict; a chapter that fails is reported and the others still run.",
     )
-    p.add_argument("chapter", choices=sorted(CHAPTERS), help="which experiment")
+    p.add_argument("chapter", choices=sorted(CHAPTERS) + ["all"], help="which experiment, or all")
     p.add_argument("--runs", type=int, default=10, help="seeded runs per condition (default 10)")
     p.add_argument("--quick", action="store_true", help="shortened runs, for a first look (about a minute)")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes")
     p.add_argument("--out", default="out", help="output folder (default ./out)")
+    p.add_argument(
+        "--cluster",
+        default=None,
+        metavar="ADDRESS",
+        help="run the seeded jobs as tasks on the Ray cluster at ADDRESS (HOST:PORT of its head, ray://HOST:10001, "
+        "or auto; needs the 'cluster' extra); default: --workers local processes",
+    )
     p.add_argument(
         "--scene",
         choices=("wall", "natural"),
         default="wall",
         help="retina only: the dark wall with a spot (ch. 4, default) or a natural picture (Table 4.1)",
     )
+    p.add_argument(
+        "--chapters",
+        default=None,
+        metavar="LIST",
+        help=f"all only: the chapters to run, comma-separated (default every one: {','.join(ALL)})",
+    )
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="all only: run nothing; judge the results.json already in --out again and rewrite the report",
+    )
     p.set_defaults(func=main_args)
+
+
+def _run_chapter(
+    name: str, fn: Callable[[int, bool, int, str], dict], args: argparse.Namespace
+) -> tuple[dict, str, float]:
+    """Run one chapter into OUT/NAME (results.json, table.md, plots); return its result, folder and seconds."""
+    out = os.path.join(args.out, name)
+    os.makedirs(out, exist_ok=True)
+    t0 = time.time()
+    with use_cluster(getattr(args, "cluster", None)):
+        res = fn(args.runs, args.quick, args.workers, out)
+    with open(os.path.join(out, "results.json"), "w") as f:
+        json.dump(res, f, default=float)
+    with open(os.path.join(out, "table.md"), "w") as f:
+        f.write(res["markdown"] + "\n")
+    return res, out, time.time() - t0
+
+
+def _where(args: argparse.Namespace) -> str:
+    cluster = getattr(args, "cluster", None)
+    return f"{args.workers} workers" if cluster is None else f"Ray cluster {cluster}"
+
+
+def _header(args: argparse.Namespace, names: list[str], chapters: list[Any], total: float | None) -> dict[str, str]:
+    from sensorimotor.tools import report
+
+    env = report.environment(os.path.dirname(os.path.abspath(__file__)))
+
+    def secs(x: float | None) -> str:
+        return "?" if x is None or x != x else f"{x:.0f} s"
+
+    return {
+        "command": f"sme reproduce all --runs {args.runs}{' --quick' if args.quick else ''}"
+        + (f" --chapters {','.join(names)}" if getattr(args, "chapters", None) else ""),
+        "seeds": f"0..{args.runs - 1} per condition"
+        + (" (chapter9 --quick: at most 5)" if "chapter9" in names else ""),
+        "wall time": ("?" if total is None else f"{total:.0f} s ({total / 60:.1f} min)")
+        + ", "
+        + ", ".join(f"{c.name} {secs(c.seconds)}" for c in chapters),
+        "executed on": _where(args),
+        "machine": f"{env.pop('host', '?')}, {env.pop('platform', '?')}, {env.pop('cpus', '?')} CPUs",
+        "versions": ", ".join(f"{k} {v}" for k, v in env.items()),
+    }
+
+
+def _chapter_report(name: str, res: dict, out: str, seconds: float, quick: bool) -> Any:
+    import glob
+
+    from sensorimotor.tools import report
+
+    rows = report.chapter_rows(name, res, quick)
+    figures = sorted(glob.glob(os.path.join(out, "*.png")))
+    return report.ChapterReport(
+        name, report.CHAPTER_ROWS[name][0], seconds, rows, figures, table=res.get("markdown", "")
+    )
+
+
+def _names(args: argparse.Namespace) -> list[str] | None:
+    names = list(ALL) if not getattr(args, "chapters", None) else [c.strip() for c in args.chapters.split(",")]
+    unknown = [c for c in names if c not in ALL]
+    if unknown or not names:
+        print(f"sme reproduce: unknown chapter(s) {', '.join(unknown)}; valid: {', '.join(ALL)}", file=sys.stderr)
+        return None
+    return names
+
+
+def report_only(args: argparse.Namespace) -> int:
+    """`sme reproduce all --report-only`: judge the chapters' results.json in OUT again and rewrite the
+    report (wall times from OUT/run.json when the run wrote one, else unknown)."""
+    from sensorimotor.tools import report
+
+    names = _names(args)
+    if names is None:
+        return 2
+    meta: dict[str, Any] = {}
+    if os.path.exists(os.path.join(args.out, "run.json")):
+        with open(os.path.join(args.out, "run.json")) as f:
+            meta = json.load(f)
+    chapters = []
+    for name in names:
+        out = os.path.join(args.out, name)
+        info = meta.get("chapters", {}).get(name, {})
+        seconds = info.get("seconds", float("nan"))
+        if info.get("error"):
+            chapters.append(report.ChapterReport(name, report.CHAPTER_ROWS[name][0], seconds, error=info["error"]))
+            continue
+        try:
+            with open(os.path.join(out, "results.json")) as f:
+                res = json.load(f)
+        except (OSError, ValueError) as e:
+            chapters.append(
+                report.ChapterReport(name, report.CHAPTER_ROWS[name][0], seconds, error=f"no results to judge: {e}")
+            )
+            continue
+        chapters.append(_chapter_report(name, res, out, seconds, args.quick))
+    md, page = report.write_report(chapters, _header(args, names, chapters, meta.get("total")), args.out)
+    print(f"{md} and {page} rewritten from the results in {args.out}/")
+    return 0
+
+
+def main_all(args: argparse.Namespace) -> int:
+    """`sme reproduce all`: every chapter in turn (a failure is recorded and the rest run), then the report."""
+    import traceback
+
+    from sensorimotor.tools import report
+
+    if getattr(args, "report_only", False):
+        return report_only(args)
+    names = _names(args)
+    if names is None:
+        return 2
+    os.makedirs(args.out, exist_ok=True)
+    t_all = time.time()
+    print(
+        f"sme reproduce all: {len(names)} chapters, {args.runs} runs each{' (quick)' if args.quick else ''}, "
+        f"{_where(args)}, writing {args.out}/ ...",
+        flush=True,
+    )
+    chapters: list[report.ChapterReport] = []
+    meta: dict[str, Any] = {"chapters": {}, "total": None}
+
+    def save_meta() -> None:  # after every chapter: a run cut short still leaves its times
+        with open(os.path.join(args.out, "run.json"), "w") as f:
+            json.dump(meta, f)
+
+    for i, name in enumerate(names, 1):
+        title = report.CHAPTER_ROWS[name][0]
+        print(f"[{i}/{len(names)}] {name}: {title} ...", flush=True)
+        t0 = time.time()
+        try:
+            res, out, seconds = _run_chapter(name, ALL[name], args)
+        except Exception:  # one chapter's failure must not lose the others: it goes into the report
+            err = traceback.format_exc()
+            chapters.append(report.ChapterReport(name, title, time.time() - t0, error=err))
+            meta["chapters"][name] = {"seconds": time.time() - t0, "error": err}
+            save_meta()
+            print(
+                f"[{i}/{len(names)}] {name} FAILED after {time.time() - t0:.0f} s: {err.strip().splitlines()[-1]}",
+                flush=True,
+            )
+            continue
+        chapters.append(_chapter_report(name, res, out, seconds, args.quick))
+        meta["chapters"][name] = {"seconds": seconds, "error": None}
+        save_meta()
+        rows = chapters[-1].rows
+        verdicts = ", ".join(
+            f"{sum(r.verdict == v for r in rows)} {v}" for v in (report.MET, report.NOT_MET, report.NOT_COMPARABLE)
+        )
+        print(f"[{i}/{len(names)}] {name} done in {seconds:.0f} s: {verdicts}", flush=True)
+    total = time.time() - t_all
+    meta["total"] = total
+    save_meta()
+    md, page = report.write_report(chapters, _header(args, names, chapters, total), args.out)
+    print(f"\n({total:.0f} s; {md} and {page})")
+    return 1 if any(c.error for c in chapters) else 0
 
 
 def main_args(args: argparse.Namespace) -> int:
@@ -640,31 +861,29 @@ def main_args(args: argparse.Namespace) -> int:
         print("sme reproduce: --runs and --workers must be >= 1", file=sys.stderr)
         return 2
     require("matplotlib")  # the plots need it: say so now, not after the runs
+    if getattr(args, "cluster", None) is not None:
+        require("ray", package="ray", extra="cluster")  # say so now, not after the first chapter's set-up
     scene = getattr(args, "scene", "wall")
     if scene != "wall" and args.chapter != "retina":
         print("sme reproduce: --scene applies to the retina chapter only", file=sys.stderr)
         return 2
+    if (getattr(args, "chapters", None) or getattr(args, "report_only", False)) and args.chapter != "all":
+        print("sme reproduce: --chapters and --report-only apply to `all` only", file=sys.stderr)
+        return 2
+    if args.chapter == "all":
+        return main_all(args)
     chapter_fn = CHAPTERS[args.chapter]
     name = args.chapter
     if scene == "natural":
-        from sensorimotor.tools.experiments.retina_natural import chapter as chapter_fn
-
-        name = "retina-natural"
-    out = os.path.join(args.out, name)
-    os.makedirs(out, exist_ok=True)
-    t0 = time.time()
+        chapter_fn, name = retina_natural, "retina-natural"
     print(
-        f"sme reproduce {name}: {args.runs} runs{' (quick)' if args.quick else ''}, "
-        f"{args.workers} workers, writing {out}/ ...",
+        f"sme reproduce {name}: {args.runs} runs{' (quick)' if args.quick else ''}, {_where(args)}, "
+        f"writing {os.path.join(args.out, name)}/ ...",
         flush=True,
     )
-    res = chapter_fn(args.runs, args.quick, args.workers, out)
-    with open(os.path.join(out, "results.json"), "w") as f:
-        json.dump(res, f, default=float)
-    with open(os.path.join(out, "table.md"), "w") as f:
-        f.write(res["markdown"] + "\n")
+    res, out, seconds = _run_chapter(name, chapter_fn, args)
     print(res["markdown"])
-    print(f"\n({time.time() - t0:.0f} s; table.md, results.json and PNG plots in {out}/)")
+    print(f"\n({seconds:.0f} s; table.md, results.json and PNG plots in {out}/)")
     return 0
 
 

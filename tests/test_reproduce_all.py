@@ -1,0 +1,151 @@
+"""`sme reproduce all`: a tiny configuration (one quick chapter, two runs, and a chapter that fails)
+gives one report in which every row has a verdict and the failure is reported; the HTML report is
+opened in headless Chromium (installed by `.ci/run` where apt-get can), and its figures load."""
+
+import json
+import os
+import re
+import shutil
+import subprocess
+
+import pytest
+
+from sensorimotor.tools import report, reproduce
+from sensorimotor.tools.cli import main
+
+VERDICTS = {report.MET, report.NOT_MET, report.NOT_COMPARABLE}
+
+
+def broken(runs, quick, workers, out):
+    raise RuntimeError("this chapter is broken on purpose")
+
+
+@pytest.fixture(scope="module")
+def tiny_report(tmp_path_factory):
+    pytest.importorskip("matplotlib")
+    out = tmp_path_factory.mktemp("all")
+    mp = pytest.MonkeyPatch()
+    mp.setitem(reproduce.ALL, "broken", broken)
+    mp.setitem(report.CHAPTER_ROWS, "broken", ("A chapter that fails", lambda res, quick: []))
+    try:
+        code = main(
+            [
+                "reproduce",
+                "all",
+                "--quick",
+                "--runs",
+                "2",
+                "--workers",
+                "1",
+                "--chapters",
+                "gridworld,broken",
+                "--out",
+                str(out),
+            ]
+        )
+    finally:
+        mp.undo()
+    return code, out
+
+
+def test_reproduce_all_writes_one_report_with_a_verdict_per_row(tiny_report, capsys):
+    code, out = tiny_report
+    assert code == 1  # a chapter failed: reported, and the exit status says so
+    md = (out / "report.md").read_text()
+    assert "## Chapter 5: robot position in a gridworld (`gridworld`" in md
+    assert "## A chapter that fails (`broken`" in md and "this chapter is broken on purpose" in md
+    rows = [line for line in md.splitlines() if line.startswith("| ") and "**" in line]
+    assert len(rows) == 4
+    for line in rows:
+        verdict = re.search(r"\*\*(.+?)\*\*", line).group(1)
+        assert verdict in VERDICTS, line
+    assert "| random policy: Procrustes error |" in md
+    for key in ("wall time", "machine", "versions", "seeds", "numpy"):
+        assert key in md
+    assert "![gridworld_lspi.png](gridworld/gridworld_lspi.png)" in md
+    assert "trustworthiness / continuity / D_metric / D_topo" in md  # the chapter's full table is in
+    with open(out / "gridworld" / "results.json") as f:
+        assert len(json.load(f)["results"]) == 6  # 2 runs x (plain, barrier, random)
+    page = (out / "report.html").read_text()
+    assert "data:image/png;base64," in page and "src='gridworld/" not in page  # self-contained
+    assert "<td class='met'>met</td>" in page
+
+
+def test_bad_chapter_list_is_a_usage_error(tmp_path, capsys):
+    assert main(["reproduce", "all", "--chapters", "nope", "--out", str(tmp_path)]) == 2
+    assert "unknown chapter(s) nope" in capsys.readouterr().err
+    assert main(["reproduce", "gridworld", "--chapters", "gridworld", "--out", str(tmp_path)]) == 2
+
+
+CHECK = """<script>
+window.addEventListener('load', () => {
+  const imgs = [...document.images];
+  document.body.setAttribute('data-check', JSON.stringify({
+    images: imgs.length,
+    loaded: imgs.filter(i => i.complete && i.naturalWidth > 0).length,
+    text: document.body.innerText.trim().length,
+    height: document.body.scrollHeight}));
+});
+</script></body>"""
+
+
+def test_report_html_opens_in_headless_chromium_with_every_figure(tiny_report, tmp_path):
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("chromium is not installed (Debian: apt-get install -y chromium; .ci/run does it as root)")
+    _, out = tiny_report
+    page = tmp_path / "checked.html"  # the report plus a probe that records what loaded
+    page.write_text((out / "report.html").read_text().replace("</body>", CHECK))
+    flags = [
+        browser,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--no-first-run",
+        f"--user-data-dir={tmp_path / 'profile'}",
+    ]
+    dom = subprocess.run(
+        [*flags, "--virtual-time-budget=5000", "--dump-dom", page.as_uri()],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    ).stdout
+    found = re.search(r"data-check=\"([^\"]+)\"", dom)
+    assert found, dom[:500]
+    check = json.loads(found.group(1).replace("&quot;", '"'))
+    assert check["images"] >= 1 and check["loaded"] == check["images"]
+    assert check["text"] > 500 and check["height"] > 500
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [*flags, "--window-size=1200,1600", f"--screenshot={shot}", (out / "report.html").as_uri()],
+        capture_output=True,
+        timeout=120,
+        check=True,
+    )
+    import matplotlib.image
+
+    pixels = matplotlib.image.imread(str(shot))
+    assert pixels.std() > 0.05  # not a blank page
+    assert os.path.getsize(shot) > 10_000
+
+
+def test_report_only_judges_the_results_again_without_running(tiny_report, tmp_path):
+    _, out = tiny_report
+    before = (out / "report.md").read_text()
+    with open(out / "run.json") as f:
+        meta = json.load(f)
+    assert meta["chapters"]["broken"]["error"] and meta["total"] > 0
+    (out / "report.md").unlink()
+    mp = pytest.MonkeyPatch()
+    mp.setitem(reproduce.ALL, "broken", broken)
+    mp.setitem(report.CHAPTER_ROWS, "broken", ("A chapter that fails", lambda res, quick: []))
+    try:
+        args = ["reproduce", "all", "--quick", "--runs", "2", "--chapters", "gridworld,broken", "--out", str(out)]
+        assert main([*args, "--report-only"]) == 0
+    finally:
+        mp.undo()
+    after = (out / "report.md").read_text()
+    table = [line for line in before.splitlines() if line.startswith("| ")]
+    assert table == [line for line in after.splitlines() if line.startswith("| ")]
+    assert "this chapter is broken on purpose" in after

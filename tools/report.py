@@ -1,0 +1,556 @@
+"""The one report of `sme reproduce all`: per chapter, each claim of the dissertation beside our number
+(mean ± 95 % CI over seeded runs) and a verdict — met, not met, or not comparable — with the reason;
+then the machine, versions, seeds and wall time. Written as report.md (figures linked) and
+report.html (self-contained: figures embedded as data URIs, no server, no script).
+
+The rows are read from each chapter's result dict (what `sme reproduce CHAPTER` writes to
+results.json); the dissertation's numbers are those of `shared/SEED-NOTES.md`."""
+
+from __future__ import annotations
+
+import base64
+import html
+import importlib.metadata
+import os
+import platform
+import re
+import subprocess
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+MET, NOT_MET, NOT_COMPARABLE = "met", "not met", "not comparable"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One claim: what is measured, our value, the dissertation's, the verdict and why."""
+
+    measure: str
+    ours: str
+    dissertation: str
+    verdict: str
+    why: str
+
+
+@dataclass
+class ChapterReport:
+    """One chapter of the report: its rows, figures (file paths), wall time, and the error that
+    stopped it (then no rows)."""
+
+    name: str
+    title: str
+    seconds: float
+    rows: list[Row] = field(default_factory=list)
+    figures: list[str] = field(default_factory=list)
+    error: str | None = None
+    table: str = ""  # the chapter's own table (its table.md): every number of the chapter
+
+
+def ci95(values: Sequence[float | None] | np.ndarray) -> tuple[float, float]:
+    """Mean and the half-width of its 95 % t interval (0 for fewer than two values)."""
+    from scipy import stats
+
+    a = np.asarray([v for v in values if v is not None], dtype=np.float64)
+    if a.size == 0:
+        return float("nan"), float("nan")
+    if a.size < 2:
+        return float(a.mean()), 0.0
+    return float(a.mean()), float(stats.t.ppf(0.975, a.size - 1) * a.std(ddof=1) / np.sqrt(a.size))
+
+
+def fmt(ci: tuple[float, float], digits: int = 3) -> str:
+    return f"{ci[0]:.{digits}f} ± {ci[1]:.{digits}f}"
+
+
+def _at_most(ci: tuple[float, float], target: float, tol: float = 0.0) -> tuple[str, str]:
+    """Lower is better: met when our mean is at most `target * (1 + tol)`; the reason says where
+    the interval lies (a wide interval alone never meets a claim)."""
+    bound = target * (1 + tol)
+    lo, hi = ci[0] - ci[1], ci[0] + ci[1]
+    if ci[0] <= bound:
+        sure = "the whole interval too" if hi <= bound else f"the interval reaches {hi:.4g}"
+        return MET, f"mean {ci[0]:.4g} at most {bound:.4g} ({sure})"
+    if lo <= bound:
+        return NOT_MET, f"mean {ci[0]:.4g} above {bound:.4g}, though the interval reaches {lo:.4g}"
+    return NOT_MET, f"the whole interval is above {bound:.4g} (lower bound {lo:.4g})"
+
+
+def _at_least(ci: tuple[float, float], target: float) -> tuple[str, str]:
+    """Higher is better: met when our mean is at least `target` (the reason says where the interval lies)."""
+    lo, hi = ci[0] - ci[1], ci[0] + ci[1]
+    if ci[0] >= target:
+        sure = "the whole interval too" if lo >= target else f"the interval reaches {lo:.4g}"
+        return MET, f"mean {ci[0]:.4g} at least {target:.4g} ({sure})"
+    if hi >= target:
+        return NOT_MET, f"mean {ci[0]:.4g} below {target:.4g}, though the interval reaches {hi:.4g}"
+    return NOT_MET, f"the whole interval is below {target:.4g} (upper bound {hi:.4g})"
+
+
+def _lower(a: tuple[float, float], b: tuple[float, float], what: str) -> tuple[str, str]:
+    """Met when interval `a` lies entirely below interval `b`."""
+    if a[0] + a[1] < b[0] - b[1]:
+        return MET, f"{what}: the intervals do not overlap"
+    if a[0] < b[0]:
+        return NOT_MET, f"{what}: lower on average, but the intervals overlap"
+    return NOT_MET, f"{what}: not lower"
+
+
+def _quick(quick: bool, ours: str, full: str) -> str:
+    return f" (quick run: {ours}; the dissertation: {full})" if quick else ""
+
+
+# --- per chapter ----------------------------------------------------------------------------------
+
+
+def rows_gridworld(res: dict[str, Any], quick: bool) -> list[Row]:
+    by = {"plain": [], "barrier": [], "random": []}  # type: dict[str, list[dict]]
+    for r in res["results"]:
+        by["random" if r["policy"] == "random" else "barrier" if r["barrier"] else "plain"].append(r)
+    first = ci95([r["errors"][0] for r in by["plain"]])
+    final = {k: ci95([r["errors"][-1] for r in v]) for k, v in by.items()}
+    trust = ci95([(r["scores"][-1] or {}).get("trustworthiness") for r in by["plain"]])
+    out = [
+        Row(
+            "plain: Procrustes error, first → last LSPI embedding",
+            f"{fmt(first, 4)} → {fmt(final['plain'], 4)}",
+            "falls as LSPI iterates (Fig 5.4)",
+            *_lower(final["plain"], first, "last below first"),
+        )
+    ]
+    ratio = final["barrier"][0] / max(final["plain"][0], 1e-12)
+    out.append(
+        Row(
+            "barrier: Procrustes error of the last embedding",
+            fmt(final["barrier"], 4),
+            "the barrier does not defeat sensorimotor embedding",
+            MET if final["barrier"][0] <= 2 * final["plain"][0] + 0.02 else NOT_MET,
+            f"{ratio:.2f}x the plain grid's (met: within 2x + 0.02)",
+        )
+    )
+    out.append(
+        Row(
+            "random policy: Procrustes error",
+            fmt(final["random"], 4),
+            "a random policy gives a random embedding",
+            MET if final["random"][0] > 0.5 else NOT_MET,
+            "met when above 0.5 (unrelated shapes score near 1)",
+        )
+    )
+    out.append(
+        Row(
+            "plain: trustworthiness of the last embedding (k = 5)",
+            fmt(trust),
+            "not reported",
+            NOT_COMPARABLE,
+            "the dissertation reports Procrustes error only",
+        )
+    )
+    return out
+
+
+def rows_retina(res: dict[str, Any], quick: bool) -> list[Row]:
+    learning, lesion, reversal = res["learning"], res["lesion"], res["reversal"]
+    steps = learning[0]["steps"][-1] if learning and learning[0]["steps"] else 0
+    one = ci95([r["one"][-1] for r in learning])
+    two = ci95([r["two"][-1] for r in learning])
+    end = {
+        rule: ci95([np.mean(r["activation"][-4:]) for r in lesion if r["rule"] == rule]) for rule in ("basic", "robust")
+    }
+    delays = [r["detection_delay"] for r in reversal]
+    note = _quick(quick, f"{steps} training saccades", "5000")
+    v, why = _at_most(one, 5.0, tol=0.2)
+    out = [Row(f"1-saccade error after {steps} saccades (px)", fmt(one, 2), "about 5 px after 5000", v, why + note)]
+    out.append(Row("2-saccade error (px)", fmt(two, 2), "lower than 1 saccade", *_lower(two, one, "2 below 1 saccade")))
+    v, why = _lower(end["basic"], end["robust"], "basic below robust")
+    out.append(
+        Row(
+            "lesion: greedy post-saccade activation at the end, basic vs robust rule",
+            f"basic {fmt(end['basic'], 1)} / robust {fmt(end['robust'], 1)}",
+            "the robust rule recovers, the basic does not (Fig 4.4)",
+            v,
+            why,
+        )
+    )
+    detected = [d for d in delays if d is not None]
+    out.append(
+        Row(
+            "reversal: detected by the agent itself (saccades after)",
+            f"{delays}",
+            "the moving average falls for about 1000 saccades, then the retina resets (Fig 4.5)",
+            MET if len(detected) == len(delays) and delays else NOT_MET,
+            f"{len(detected)} of {len(delays)} runs detected it, mean {np.mean(detected) if detected else float('nan'):.0f} saccades",
+        )
+    )
+    return out
+
+
+def rows_retina_natural(res: dict[str, Any], quick: bool) -> list[Row]:
+    s, d = res["summary"], res["dissertation"]
+    labels = {"one": "1 saccade", "two": "2 saccades", "fixed": "fixed point", "geometry": "mean geometry error"}
+    out = []
+    for k, label in labels.items():
+        ci = (s[k]["mean"], s[k]["ci95"])
+        v, why = _at_most(ci, float(d[k]), tol=0.2)
+        out.append(
+            Row(
+                f"Table 4.1 {label} (px)",
+                fmt(ci, 1),
+                f"{'about ' if k == 'geometry' else ''}{d[k]} px",
+                v,
+                why + " (met: ours at most 1.2x theirs); a different image than the Berkeley set",
+            )
+        )
+    return out
+
+
+def rows_rovingeye(res: dict[str, Any], quick: bool) -> list[Row]:
+    out = []
+    for m, target in res["dissertation"]["errors"].items():
+        e = res["errors"][m]
+        v, why = _at_most((e["mean"], e["ci95"]), float(target))
+        out.append(Row(f"Table 5.1 Procrustes error, {m}", fmt((e["mean"], e["ci95"]), 3), f"{target}", v, why))
+    for m, target in res["dissertation"]["scores"].items():
+        sc = res["scores"][m]
+        v, why = _at_least((sc["mean"], sc["ci95"]), float(target))
+        out.append(Row(f"Table 5.1 score, {m}", fmt((sc["mean"], sc["ci95"]), 3), f"{target}", v, why))
+    out.append(
+        Row(
+            "better policies give better embeddings (error ordering)",
+            str(res["ordering_holds"]),
+            "sensor > gradient > ε-gradient > hand-coded > ballistic",
+            MET if res["ordering_holds"] else NOT_MET,
+            "the mean errors in that order",
+        )
+    )
+    return out
+
+
+def rows_objectpose(res: dict[str, Any], quick: bool) -> list[Row]:
+    s = res["summary"]
+    ratio = s["ratio_to_better_peer"]
+    out = [
+        Row(
+            "sensorimotor embedding Procrustes error vs the better of PCA and Isomap",
+            f"{fmt(tuple(s['se_error']), 4)} vs PCA {fmt(tuple(s['pca_error']), 4)}, Isomap {fmt(tuple(s['isomap_error']), 4)}",
+            "far lower than PCA or Isomap (Fig 6.3)",
+            MET if ratio <= 1 / 3 else NOT_MET,
+            f"ratio {ratio:.3f} (met: at most 1/3)",
+        )
+    ]
+    fin = tuple(s["alignment_final_success"])
+    out.append(
+        Row(
+            "alignment task: starts that reach the target after 5 LSPI iterations",
+            fmt(fin, 3),
+            "solvable in a few LSPI iterations (Fig 6.4)",
+            *_at_least(fin, 0.95),
+        )
+    )
+    return out
+
+
+def rows_vergence(res: dict[str, Any], quick: bool) -> list[Row]:
+    out = []
+    for w, perfect_in, proc in (("vergence", 9, 0.0257), ("stereo", None, 0.0003)):
+        rs = [r for r in res["results"] if r["world"] == w]
+        if not rs:
+            continue
+        err = ci95([r["errors"][-1] for r in rs])
+        if perfect_in is not None:
+            firsts = [r["first_perfect_iteration"] for r in rs]
+            ok = all(f is not None and f <= perfect_in for f in firsts)
+            out.append(
+                Row(
+                    f"{w}: first LSPI iteration with a perfect policy",
+                    str(firsts),
+                    f"{perfect_in}",
+                    MET if ok else NOT_MET,
+                    f"every run at or before iteration {perfect_in}" if ok else "some run later or never",
+                )
+            )
+        else:
+            diff = np.abs(np.concatenate([np.asarray(r["goal_minus_truth"]) for r in rs]))
+            frac = float((diff <= 2).mean())
+            out.append(
+                Row(
+                    "stereo: perceptual-goal disparity within 2 px of truth",
+                    f"{100 * frac:.0f} % of starts",
+                    "within 2 px (126 vs 128 px)",
+                    MET if frac >= 0.9 else NOT_MET,
+                    "met: at least 90 % of starts",
+                )
+            )
+        v, why = _at_most(err, proc)
+        out.append(Row(f"{w}: Procrustes error of the depth map", fmt(err, 4), f"{proc}", v, why))
+    return out
+
+
+def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
+    ci = {k: tuple(v) for k, v in res["ci95"].items()}
+    t = ci["true"][0]
+    out = []
+    for k in ("baseline-1.0", "baseline-1.4", "vertical"):
+        r = ci[k][0] / t
+        out.append(
+            Row(
+                f"{k}: steps to goal at the end",
+                f"{fmt(ci[k], 1)} ({r:.2f}x true state {fmt(ci['true'], 1)})",
+                "comparable to the agent given true position and velocity",
+                MET if r <= 1.2 else NOT_MET,
+                f"{r:.2f}x the true-state agent (met: within 1.2x)",
+            )
+        )
+    for pair, p in res["welch_p"].items():
+        comparable = p == p  # NaN with one run
+        out.append(
+            Row(
+                f"bodies {pair}: Welch t-test",
+                "n/a" if not comparable else f"p = {p:.3f}",
+                "no significant difference",
+                (MET if p > 0.05 else NOT_MET) if comparable else NOT_COMPARABLE,
+                "p > 0.05: no significant difference" if comparable else "one run per body: no test",
+            )
+        )
+    out.append(
+        Row(
+            "random agent: steps to goal",
+            fmt(ci["random"], 1),
+            "the benchmark",
+            NOT_COMPARABLE,
+            "a baseline, not a claim",
+        )
+    )
+    return out
+
+
+def rows_chapter9(res: dict[str, Any], quick: bool) -> list[Row]:
+    opt = res["options"]
+    st = opt["steps_to_level"]
+    disc = (st["discovered"]["mean"], st["discovered"]["ci95"])
+    out = []
+    for other in ("none", "random"):
+        o = (st[other]["mean"], st[other]["ci95"])
+        v, why = _lower(disc, o, f"discovered options below {other}")
+        out.append(
+            Row(
+                f"options: training steps to the level, discovered vs {other}",
+                f"{fmt(disc, 0)} vs {fmt(o, 0)}",
+                "the agent with discovered options learns faster than with none or random ones (9.6)",
+                v,
+                why + " (a gridworld here; the dissertation's was the mountain car)",
+            )
+        )
+    prob = res["probabilistic"]["ci95"]
+    out.append(
+        Row(
+            "probabilistic embedding (9.4): Procrustes error plain / mode / mean",
+            " / ".join(fmt(tuple(prob[k]), 4) for k in ("plain", "mode", "mean")),
+            "future work, no number",
+            NOT_COMPARABLE,
+            "the dissertation names it as future work only",
+        )
+    )
+    return out
+
+
+#: chapter name -> (title, the rows of its result)
+CHAPTER_ROWS: dict[str, tuple[str, Callable[[dict[str, Any], bool], list[Row]]]] = {
+    "retina": ("Chapter 4: foveated retina and saccades", rows_retina),
+    "retina-natural": ("Chapter 4: natural scenes (Table 4.1)", rows_retina_natural),
+    "gridworld": ("Chapter 5: robot position in a gridworld", rows_gridworld),
+    "rovingeye": ("Chapter 5.2: roving eye (Table 5.1)", rows_rovingeye),
+    "objectpose": ("Chapter 6: object pose", rows_objectpose),
+    "vergence": ("Chapter 7: depth from vergence", rows_vergence),
+    "mountaincar": ("Chapter 8: visual mountain car", rows_mountaincar),
+    "chapter9": ("Chapter 9: beyond the dissertation", rows_chapter9),
+}
+
+
+def chapter_rows(name: str, res: dict[str, Any], quick: bool) -> list[Row]:
+    """The rows of chapter `name`; a row that cannot be read says so instead of failing the report."""
+    try:
+        return CHAPTER_ROWS[name][1](res, quick)
+    except (KeyError, IndexError, TypeError, ValueError) as e:
+        return [Row("(the chapter's results)", "unreadable", "", NOT_COMPARABLE, f"{type(e).__name__}: {e}")]
+
+
+# --- the environment --------------------------------------------------------------------------------
+
+
+def environment(root: str) -> dict[str, str]:
+    """Machine, Python, the versions of the libraries the numbers depend on, and the git commit."""
+    out = {
+        "host": platform.node(),
+        "platform": platform.platform(),
+        "cpus": str(os.cpu_count()),
+        "python": platform.python_version(),
+    }
+    for dist in (
+        "sensorimotor-embedding",
+        "numpy",
+        "scipy",
+        "scikit-learn",
+        "pybullet",
+        "eclipse-zenoh",
+        "river",
+        "ray",
+    ):
+        try:
+            out[dist] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    try:
+        out["commit"] = subprocess.run(
+            ["git", "-C", root, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return out
+
+
+# --- writing ------------------------------------------------------------------------------------------
+
+
+def _secs(x: float) -> str:
+    """A wall time for a heading: ``12 s``, or ``time unknown`` (a report rebuilt without run.json)."""
+    return "time unknown" if x != x else f"{x:.0f} s"
+
+
+def _md_cell(s: str) -> str:
+    return s.replace("|", "\\|").replace("\n", " ")
+
+
+def markdown(chapters: list[ChapterReport], header: dict[str, str], out: str) -> str:
+    """report.md: the header, then per chapter its verdict table and figures (paths relative to `out`)."""
+    lines = ["# The dissertation reproduced: `sme reproduce all`", ""]
+    lines += [f"- **{k}**: {v}" for k, v in header.items()]
+    counts = {v: sum(r.verdict == v for c in chapters for r in c.rows) for v in (MET, NOT_MET, NOT_COMPARABLE)}
+    failed = [c.name for c in chapters if c.error]
+    lines += [
+        "",
+        f"Verdicts: {counts[MET]} met, {counts[NOT_MET]} not met, {counts[NOT_COMPARABLE]} not comparable"
+        + (f"; chapters that failed: {', '.join(failed)}" if failed else "; every chapter ran")
+        + ".",
+        "",
+    ]
+    for c in chapters:
+        lines += [f"## {c.title} (`{c.name}`, {_secs(c.seconds)})", ""]
+        if c.error:
+            lines += ["**This chapter failed**; the others ran:", "", "```", c.error.rstrip(), "```", ""]
+            continue
+        lines += ["| measure | ours (mean ± 95 % CI) | dissertation | verdict | why |", "|---|---|---|---|---|"]
+        lines += [
+            f"| {' | '.join(_md_cell(x) for x in (r.measure, r.ours, r.dissertation, '**' + r.verdict + '**', r.why))} |"
+            for r in c.rows
+        ]
+        lines.append("")
+        lines += [f"![{os.path.basename(f)}]({os.path.relpath(f, out)})" for f in c.figures]
+        lines += [
+            "",
+            f"<details><summary>The chapter's full table ({c.name}/table.md)</summary>",
+            "",
+            c.table,
+            "",
+            "</details>",
+            "",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+_CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse;margin:1em 0;font-size:90%}td,th{border:1px solid #ccc;padding:4px 8px;vertical-align:top}
+th{background:#f3f3f3}.met{color:#176f2c;font-weight:bold}.notmet{color:#a32020;font-weight:bold}
+.nc{color:#777;font-weight:bold}img{max-width:100%;margin:.5em 0;border:1px solid #eee}pre{background:#f7f7f7;padding:1em;overflow:auto}"""
+
+
+def _inline(text: str) -> str:
+    """Markdown inline code and bold to HTML (the chapters' tables use no other markup)."""
+    t = html.escape(text)
+    t = re.sub(r"`([^`]+)`", r"<code>\1</code>", t)
+    return re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", t)
+
+
+def md_to_html(md: str) -> str:
+    """A chapter's table.md as HTML: pipe tables become tables, headings h4, other lines paragraphs."""
+    out: list[str] = []
+    table: list[list[str]] = []
+
+    def flush() -> None:
+        if table:
+            head, *body = table
+            out.append("<table><tr>" + "".join(f"<th>{_inline(c)}</th>" for c in head) + "</tr>")
+            out.extend("<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in row) + "</tr>" for row in body)
+            out.append("</table>")
+            table.clear()
+
+    for line in md.splitlines():
+        st = line.strip()
+        if st.startswith("|"):
+            cells = [c.strip() for c in st.strip("|").split("|")]
+            if not all(set(c) <= set("-: ") for c in cells):
+                table.append(cells)
+            continue
+        flush()
+        if st.startswith("#"):
+            out.append(f"<h4>{_inline(st.lstrip('#').strip())}</h4>")
+        elif st.startswith("- "):
+            out.append(f"<p>• {_inline(st[2:])}</p>")
+        elif st:
+            out.append(f"<p>{_inline(st)}</p>")
+    flush()
+    return "\n".join(out)
+
+
+def _data_uri(path: str) -> str:
+    with open(path, "rb") as f:
+        return "data:image/png;base64," + base64.b64encode(f.read()).decode("ascii")
+
+
+def html_report(chapters: list[ChapterReport], header: dict[str, str]) -> str:
+    """report.html: the same content, self-contained (figures as data URIs, inline style, no script)."""
+    e = html.escape
+    cls = {MET: "met", NOT_MET: "notmet", NOT_COMPARABLE: "nc"}
+    parts = [
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
+        "<title>sme reproduce all: report</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>The dissertation reproduced: <code>sme reproduce all</code></h1><ul>",
+    ]
+    parts += [f"<li><b>{e(k)}</b>: {e(v)}</li>" for k, v in header.items()]
+    parts.append("</ul>")
+    for c in chapters:
+        parts.append(f"<h2 id='{e(c.name)}'>{e(c.title)} (<code>{e(c.name)}</code>, {_secs(c.seconds)})</h2>")
+        if c.error:
+            parts.append(f"<p class='notmet'>This chapter failed; the others ran.</p><pre>{e(c.error)}</pre>")
+            continue
+        parts.append(
+            "<table><tr><th>measure</th><th>ours (mean ± 95 % CI)</th><th>dissertation</th><th>verdict</th><th>why</th></tr>"
+        )
+        for r in c.rows:
+            parts.append(
+                f"<tr><td>{e(r.measure)}</td><td>{e(r.ours)}</td><td>{e(r.dissertation)}</td>"
+                f"<td class='{cls.get(r.verdict, 'nc')}'>{e(r.verdict)}</td><td>{e(r.why)}</td></tr>"
+            )
+        parts.append("</table>")
+        for f in c.figures:
+            parts.append(
+                f"<figure><img alt='{e(os.path.basename(f))}' src='{_data_uri(f)}'>"
+                f"<figcaption>{e(os.path.basename(f))}</figcaption></figure>"
+            )
+        if c.table:
+            parts.append(f"<details><summary>The chapter's full table</summary>{md_to_html(c.table)}</details>")
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def write_report(chapters: list[ChapterReport], header: dict[str, str], out: str) -> tuple[str, str]:
+    """Write OUT/report.md and OUT/report.html; return their paths."""
+    md, page = os.path.join(out, "report.md"), os.path.join(out, "report.html")
+    with open(md, "w") as f:
+        f.write(markdown(chapters, header, out))
+    with open(page, "w") as f:
+        f.write(html_report(chapters, header))
+    return md, page
