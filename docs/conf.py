@@ -26,6 +26,8 @@ html_title = "sensorimotor-embedding"
 html_static_path = ["_static"]
 myst_enable_extensions = ["colon_fence"]
 myst_heading_anchors = 4
+# generated result tables (docs/reproduce/...) are linked from their page, not listed in a toctree
+suppress_warnings = ["toc.not_included"]
 autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": True}
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
