@@ -27,7 +27,6 @@ html_static_path = ["_static"]
 myst_enable_extensions = ["colon_fence"]
 myst_heading_anchors = 4
 # generated result tables (docs/reproduce/...) are linked from their page, not listed in a toctree
-suppress_warnings = ["toc.not_included"]
 autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": True}
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
@@ -37,7 +36,7 @@ napoleon_use_rtype = False
 napoleon_use_ivar = (
     True  # dataclass fields: autodoc documents them; "Attributes" sections become fields, not duplicates
 )
-suppress_warnings = ["myst.strikethrough"]
+suppress_warnings = ["myst.strikethrough", "toc.not_included"]
 nitpicky = False
 
 
