@@ -94,7 +94,7 @@ def test_panda_reach_holds_its_target_and_starts_on_a_lattice_of_hand_positions(
         spec = w.spec()
         truth = w.truth().tensors["positions"]
         assert spec.goal == "success" and spec.n_starts == 64 and truth.shape == (64, 3)
-        assert spec.params["truth_dims"] == "3" and [s.name for s in spec.sensors] == ["position", "velocity"]
+        assert spec.params["truth_dims"] == "3" and [s.name for s in spec.sensors] == ["position"]
         r = w.reset(start=5)
         assert np.allclose(r.tensors["position"], truth[5], atol=0.02)  # the hand is where the truth says
         assert make_program(spec, 0).learner == "sarsa"

@@ -80,6 +80,7 @@ class GymWorldParams:
         choices=("state", "pixels"),
     )
     pixels: int = option(64, "observe=pixels: frame side in pixels (grey)", min=8, max=512)
+    hand_velocity: bool = option(False, "panda-gym: serve the hand's velocity too, beside its position")
     headings: int = option(
         1,
         "MiniGrid: start headings per cell (1: every start faces east; 4: all four - turning first "
@@ -452,11 +453,13 @@ class GymWorld(World):
             return frame, (SensorSpec("pixels", "uint8", (n, n), 0.0, 255.0, f"{self.env_id} rendered frame, grey"),)
         space = self.env.observation_space
         if self._family == "panda" and isinstance(space, spaces.Dict):
-            # the target is held at one place and `achieved_goal` repeats the hand position: the arm's
-            # own state, as two sensors (position and velocity have their own ranges)
+            # the target is held at one place and `achieved_goal` repeats the hand position; with hand
+            # control (`control_type=ee`) the arm goes where it is sent, so its state is the hand's
+            # position (`hand_velocity=true` adds the velocity as a second sensor)
             obs_box: Any = space["observation"]
             sensors = []
-            for name, part in (("position", slice(0, 3)), ("velocity", slice(3, 6))):
+            parts = [("position", slice(0, 3))] + ([("velocity", slice(3, 6))] if self.params.hand_velocity else [])
+            for name, part in parts:
                 box = spaces.Box(obs_box.low[part], obs_box.high[part], dtype=np.float32)
                 conv_part = lambda o, part=part: np.asarray(o[part], dtype=np.float32)  # noqa: E731
                 low, high = _box_range(box, self._random_observations(conv_part, "observation"))
