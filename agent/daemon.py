@@ -229,8 +229,17 @@ class AgentDaemon:
             self.on_output(channel, msg)
 
     def event(self, world_id: str, kind: str, detail: str, reason: str = "") -> None:
-        """Publish an event about a world that has no link (yet)."""
-        self.publish("event", AgentEvent(self.agent_id, world_id, kind, detail, 0, time.time(), reason=reason))
+        """Publish an event about a world that has no link (yet), without declaring a publisher for it
+        (a flood of worlds that cannot be attached must not leave one declared publisher each)."""
+        msg = AgentEvent(self.agent_id, world_id, kind, detail, 0, time.time(), reason=reason)
+        key = keys.agent_event(self.agent_id, world_id)
+        try:
+            self.bus.put(key, codec.encode(msg), codec.schema_name(AgentEvent))
+        except Exception:
+            if not self.bus.closed:
+                log.exception("publishing on %s failed", key)
+        if self.on_output is not None:
+            self.on_output("event", msg)
 
     # bus callbacks (zenoh threads) -----------------------------------------------------------------
     # Observations are answered right in the subscriber callback by default: the lockstep world is
@@ -281,11 +290,22 @@ class AgentDaemon:
             self._shared[wid] = ckpt
 
     # truth and world events for a world without a link are counted as `unattached`, like its
-    # observations; a refused one as bad_truth / bad_world_event (the link keeps its truth)
+    # observations (`others` when another owner answers it); a refused one as bad_truth /
+    # bad_world_event (the link keeps its truth)
+    def _taker(self, wid: str) -> WorldLink | None:
+        """The link that takes world `wid`'s truth and events here, or None after counting the message:
+        `others` when another owner answers the world (that owner takes and counts it; a paused link
+        left here from before a hand-off does not count it a second time), else `unattached`."""
+        link = self.links.get(wid)
+        elsewhere = wid not in self._claims and self.book.claimed_by_other(wid, self.owner_id)
+        if link is not None and (link.state == "attached" or not elsewhere):
+            return link
+        self.counters["others" if elsewhere else "unattached"] += 1
+        return None
+
     def _on_truth(self, msg: BusMessage) -> None:
-        link = self.links.get(keys.world_of(msg.key))
+        link = self._taker(keys.world_of(msg.key))
         if link is None:
-            self.counters["unattached"] += 1
             return
         try:
             truth = codec.decode(Truth, msg.payload)
@@ -297,9 +317,8 @@ class AgentDaemon:
         link.truth = truth
 
     def _on_world_event(self, msg: BusMessage) -> None:
-        link = self.links.get(keys.world_of(msg.key))
+        link = self._taker(keys.world_of(msg.key))
         if link is None:
-            self.counters["unattached"] += 1
             return
         try:
             ev = codec.decode(WorldEvent, msg.payload)
@@ -544,12 +563,6 @@ class AgentDaemon:
     def _claim(self, wid: str) -> None:
         tok = self.bus.token(claim_key(wid, self.owner_id))
         self._claims[wid] = (tok, time.monotonic())
-        if not self.all_obs and wid not in self._obs_subs:
-            self._obs_subs[wid] = [
-                self.bus.subscribe(keys.world_obs(wid), self._on_obs),
-                self.bus.subscribe(keys.world_truth(wid), self._on_truth),
-                self.bus.subscribe(keys.world_event(wid), self._on_world_event),
-            ]
         self.counters["claimed"] += 1
         log.info("owner %s claims world %s", self.owner_id, wid)
 
@@ -596,6 +609,7 @@ class AgentDaemon:
             {w: now - t for w, t in self.book.unclaimed_since.items()},
             known=known,
             avoid=frozenset(self._avoid) | frozenset(self._bad_ids),
+            failed=frozenset(self._failed),
             claim_delay=self.claim_delay,
             may_shed=now - self._last_shed >= 2.0 and now - self._started_mono >= 2.0,
         )
@@ -686,6 +700,15 @@ class AgentDaemon:
             previous.stop()
         self.links[wid] = att.link
         self._elsewhere.discard(wid)
+        if not self.all_obs and wid not in self._obs_subs:
+            # only now: a claimed world that cannot be attached (a fake one) costs no subscriber
+            # declarations, which every session on the bus would have to route; the lockstep world
+            # resends its observation until it is answered
+            self._obs_subs[wid] = [
+                self.bus.subscribe(keys.world_obs(wid), self._on_obs),
+                self.bus.subscribe(keys.world_truth(wid), self._on_truth),
+                self.bus.subscribe(keys.world_event(wid), self._on_world_event),
+            ]
         if self.threaded_links:
             att.link.start()
         log.info(
