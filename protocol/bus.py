@@ -54,6 +54,9 @@ class BusMessage(NamedTuple):
     kind: str = "put"  # "put" or "delete"
 
 
+READER_LEASE_MS = 1000  # see BusConfig.for_role
+
+
 @dataclass(frozen=True)
 class BusConfig:
     """How to open a session: mode, endpoints, and (with `secure_dir`) the credential to present.
@@ -73,6 +76,9 @@ class BusConfig:
     retry: bool = False  # client: wait for the router to appear instead of failing
     credential: str = "tool"
     secure_dir: str | None = None
+    # False for readers (record, watch, view): a reader that stalls must not hold the publishers'
+    # shared-memory buffers (their pool runs dry and the world's observations fall back to slow copies)
+    shared_memory: bool = True
 
     ROLES = ("agent", "world", "reader", "tool", "perturb")
 
@@ -103,7 +109,19 @@ class BusConfig:
         }
         if role in clients:
             retry, cred = clients[role]
-            return cls(mode="client", connect=(ep,), listen=(), retry=retry, credential=cred, secure_dir=secure_dir)
+            return cls(
+                mode="client",
+                connect=(ep,),
+                listen=(),
+                retry=retry,
+                credential=cred,
+                secure_dir=secure_dir,
+                shared_memory=role != "reader",
+                # a reader frozen or too slow to read its link holds up every BLOCK message routed to
+                # it; the router closes its link after this lease, the reader reconnects when it runs
+                # again and counts what it missed
+                lease_ms=READER_LEASE_MS if role == "reader" else None,
+            )
         raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
 
     def check_secure(self) -> security.Credential | None:
@@ -133,6 +151,8 @@ class BusConfig:
         cfg.insert_json5("scouting/gossip/enabled", "false" if self.mode != "router" else "true")
         if self.lease_ms:
             cfg.insert_json5("transport/link/tx/lease", str(int(self.lease_ms)))
+        if not self.shared_memory:
+            cfg.insert_json5("transport/shared_memory/enabled", "false")
         cred = self.check_secure()
         if cred is not None:
             tls = {
@@ -421,15 +441,22 @@ class Bus:
         express : bool, default=True
             Send at once instead of batching (lower latency).
         block : bool, default=True
-            True (reliable, congestion BLOCK) for lockstep traffic; False drops under congestion
-            (for best-effort live views).
+            True for lockstep traffic: congestion BLOCK_FIRST - a message waits for room in a
+            receiver's queue instead of being dropped, unless the one before it to that receiver is
+            still waiting after ~1 ms (zenoh's `wait_before_drop`): then it is dropped for that
+            receiver only. A live agent drains its queue, so nothing is dropped on the way to it;
+            a reader that stalls (a recorder, viewer or watcher frozen or too slow) loses its own
+            messages instead of holding up the world and the agent. (With plain BLOCK, the router
+            stopped routing the world's observations until it closed the frozen reader's link, ~5 s
+            later.) Readers also have a 1 s lease, so a frozen one is cut off (and reconnects when it
+            runs again). False drops under congestion (for best-effort live views).
 
         Returns
         -------
         Publisher
             Its ``put(payload)`` sends one message.
         """
-        cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        cc = zenoh.CongestionControl.BLOCK_FIRST if block else zenoh.CongestionControl.DROP
         pub = self._session.declare_publisher(
             key, express=express, congestion_control=cc, encoding=self.encoding(schema)
         )
