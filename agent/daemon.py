@@ -27,6 +27,7 @@ from typing import Any
 
 from sensorimotor.agent.attach import AgentConfig, Restored, attach, program_name, same_body
 from sensorimotor.agent.checkpoint import (
+    FORMAT_VERSION,
     Checkpoint,
     CheckpointError,
     decode_checkpoint,
@@ -49,9 +50,11 @@ from sensorimotor.protocol.messages import (
     AgentStatus,
     Embedding,
     EventKind,
+    SharedCheckpoint,
     Truth,
     WorldEvent,
     WorldSpec,
+    clip,
 )
 from sensorimotor.protocol.params import as_strings, parse
 
@@ -175,6 +178,7 @@ class AgentDaemon:
             "shed": 0,  # worlds handed off to balance the load
             "shared": 0,  # checkpoints shared on the bus
             "taken_over": 0,  # links restored from another owner's shared checkpoint
+            "bad_checkpoint": 0,  # checkpoints (shared or in the state dir) refused and set aside
         }
         if link_ttl is not None and link_ttl <= 0:
             raise ValueError(f"link_ttl must be > 0 seconds (or None: never release), not {link_ttl}")
@@ -278,9 +282,13 @@ class AgentDaemon:
         if owner == self.owner_id:
             return
         try:
-            ckpt = decode_checkpoint(msg.payload)
-        except CheckpointError as e:
-            log.warning("checkpoint shared by %s for world %s refused: %s", owner, wid, e)
+            shared = codec.decode(SharedCheckpoint, msg.payload)
+            if shared.world_id != wid:
+                raise CheckpointError(f"it is for world {shared.world_id!r}")
+            ckpt = decode_checkpoint(shared.data)
+        except (CheckpointError, ProtocolError) as e:
+            self.counters["bad_checkpoint"] += 1
+            log.warning("checkpoint shared by %s for world %s refused: %s", owner, wid, clip(str(e)))
             return
         if ckpt.world_id != wid:
             log.warning("checkpoint shared by %s on world %s's key is for world %s: refused", owner, wid, ckpt.world_id)
@@ -551,8 +559,20 @@ class AgentDaemon:
             data = self._encoded_state(wid, link)
             if data is None:
                 continue
+            shared = SharedCheckpoint(
+                wid,
+                data,
+                owner=self.owner_id,
+                format_version=FORMAT_VERSION,
+                embedding_version=link.version,
+                saved_at=time.time(),
+            )
             try:
-                self.bus.put(keys.agent_checkpoint(self.owner_id, wid), data, None)
+                self.bus.put(
+                    keys.agent_checkpoint(self.owner_id, wid),
+                    codec.encode(shared),
+                    codec.schema_name(SharedCheckpoint),
+                )
                 n += 1
             except Exception as e:  # noqa: BLE001 - a closing bus: the next share will do
                 log.warning("world %s: checkpoint not shared: %s", wid, e)
@@ -723,7 +743,7 @@ class AgentDaemon:
 
     def _attach_failed(self, wid: str, reason: str, e: Exception) -> None:
         self.counters["attach_failed"] += 1
-        log.warning("world %s: cannot attach: %s", wid, e)
+        log.warning("world %s: cannot attach: %s", wid, clip(str(e)))
         self.event(wid, EventKind.ATTACH_FAILED, str(e), reason)
 
     def _detach(self, wid: str) -> None:

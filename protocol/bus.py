@@ -55,6 +55,7 @@ class BusMessage(NamedTuple):
 
 
 READER_LEASE_MS = 1000  # see BusConfig.for_role
+BLOCKED_LINK_CLOSE_US = 1_000_000  # see BusConfig.zenoh_config
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,13 @@ class BusConfig:
             cfg.insert_json5("transport/link/tx/lease", str(int(self.lease_ms)))
         if not self.shared_memory:
             cfg.insert_json5("transport/shared_memory/enabled", "false")
+        if self.mode == "router" and not self.config_file:
+            # a link that cannot take a lockstep (BLOCK) message for this long is closed, so that a
+            # frozen reader stops the routing of the world's messages for at most this long (zenoh's
+            # default is 5 s); a live agent or worker drains its link in microseconds
+            cfg.insert_json5(
+                "transport/link/tx/queue/congestion_control/block/wait_before_close", str(BLOCKED_LINK_CLOSE_US)
+            )
         cred = self.check_secure()
         if cred is not None:
             tls = {
@@ -441,22 +449,19 @@ class Bus:
         express : bool, default=True
             Send at once instead of batching (lower latency).
         block : bool, default=True
-            True for lockstep traffic: congestion BLOCK_FIRST - a message waits for room in a
-            receiver's queue instead of being dropped, unless the one before it to that receiver is
-            still waiting after ~1 ms (zenoh's `wait_before_drop`): then it is dropped for that
-            receiver only. A live agent drains its queue, so nothing is dropped on the way to it;
-            a reader that stalls (a recorder, viewer or watcher frozen or too slow) loses its own
-            messages instead of holding up the world and the agent. (With plain BLOCK, the router
-            stopped routing the world's observations until it closed the frozen reader's link, ~5 s
-            later.) Readers also have a 1 s lease, so a frozen one is cut off (and reconnects when it
-            runs again). False drops under congestion (for best-effort live views).
+            True (reliable, congestion BLOCK) for lockstep traffic; False drops under congestion
+            (for best-effort live views). A reader that stalls (a recorder, viewer or watcher frozen
+            or too slow) holds BLOCK traffic up for at most ~1 s: the agent's router closes a link
+            that cannot take a message for `BLOCKED_LINK_CLOSE_US` (zenoh's default: 5 s), readers
+            have a 1 s lease and no shared memory (see `BusConfig.for_role`); the reader reconnects
+            when it runs again and counts what it missed.
 
         Returns
         -------
         Publisher
             Its ``put(payload)`` sends one message.
         """
-        cc = zenoh.CongestionControl.BLOCK_FIRST if block else zenoh.CongestionControl.DROP
+        cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         pub = self._session.declare_publisher(
             key, express=express, congestion_control=cc, encoding=self.encoding(schema)
         )

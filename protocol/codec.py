@@ -49,6 +49,7 @@ SCHEMA_NAMES = {
     m.AgentEvent: "sme.v1.AgentEvent",
     m.WorldEvent: "sme.v1.WorldEvent",
     m.AgentStatus: "sme.v1.AgentStatus",
+    m.SharedCheckpoint: "sme.v1.Checkpoint",
 }
 
 
@@ -221,10 +222,10 @@ def _enc_event(x: m.AgentEvent) -> pb.AgentEvent:
         agent_id=x.agent_id,
         world_id=x.world_id,
         kind=x.kind,
-        detail=x.detail,
+        detail=m.clip(x.detail),
         step=x.step,
         timestamp=x.timestamp,
-        reason=x.reason,
+        reason=m.clip(x.reason, 100),
     )
     p.values.update({k: float(v) for k, v in x.values.items()})
     if x.config is not None:
@@ -240,10 +241,25 @@ def _enc_world_event(x: m.WorldEvent) -> pb.WorldEvent:
         world_id=x.world_id,
         session=x.session,
         kind=x.kind,
-        reason=x.reason,
-        detail=x.detail,
+        reason=m.clip(x.reason, 100),
+        detail=m.clip(x.detail),
         step=x.step,
         timestamp=x.timestamp,
+    )
+
+
+def _enc_checkpoint(x: m.SharedCheckpoint) -> pb.Checkpoint:
+    if len(x.data) > MAX_TENSOR_BYTES:
+        raise errors.OversizeMessage(f"Checkpoint: {len(x.data)} bytes of data, at most {MAX_TENSOR_BYTES}")
+    return pb.Checkpoint(
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        owner=x.owner,
+        epoch=x.epoch,
+        format_version=x.format_version,
+        embedding_version=x.embedding_version,
+        saved_at=_finite(x.saved_at, "Checkpoint.saved_at"),
+        data=x.data,
     )
 
 
@@ -396,6 +412,20 @@ def _dec_world_event(p: pb.WorldEvent) -> m.WorldEvent:
     return m.WorldEvent(p.world_id, p.kind, p.reason, p.detail, p.step, p.session, p.timestamp)
 
 
+def _dec_checkpoint(p: pb.Checkpoint) -> m.SharedCheckpoint:
+    if len(p.data) > MAX_TENSOR_BYTES:
+        raise errors.OversizeMessage(f"Checkpoint: {len(p.data)} bytes of data, at most {MAX_TENSOR_BYTES}")
+    return m.SharedCheckpoint(
+        p.world_id,
+        p.data,
+        p.owner,
+        p.epoch,
+        p.format_version,
+        p.embedding_version,
+        _finite(p.saved_at, "Checkpoint.saved_at"),
+    )
+
+
 def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
     links = tuple(
         m.LinkStatus(
@@ -428,6 +458,7 @@ _CODECS: dict[type, tuple[type, Callable[[Any], Any], Callable[[Any], Any]]] = {
     m.AgentEvent: (pb.AgentEvent, _enc_event, _dec_event),
     m.WorldEvent: (pb.WorldEvent, _enc_world_event, _dec_world_event),
     m.AgentStatus: (pb.AgentStatus, _enc_status, _dec_status),
+    m.SharedCheckpoint: (pb.Checkpoint, _enc_checkpoint, _dec_checkpoint),
 }
 
 
