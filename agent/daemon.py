@@ -27,6 +27,7 @@ from typing import Any
 
 from sensorimotor.agent.attach import AgentConfig, Restored, attach, program_name, same_body
 from sensorimotor.agent.checkpoint import (
+    FORMAT_VERSION,
     Checkpoint,
     CheckpointError,
     encode_checkpoint,
@@ -50,10 +51,12 @@ from sensorimotor.protocol.messages import (
     AgentStatus,
     Embedding,
     EventKind,
+    SharedCheckpoint,
     Truth,
     WorldEvent,
     WorldEventKind,
     WorldSpec,
+    clip,
 )
 from sensorimotor.protocol.params import as_strings, parse
 
@@ -197,6 +200,7 @@ class AgentDaemon:
             "lease_refused": 0,  # lease requests refused (another live owner holds the world)
             "lease_lost": 0,  # worlds that applied another owner's actions: stopped answering them
             "unfenced": 0,  # attaches to worlds without a lease queryable (answered with epoch 0)
+            "bad_checkpoint": 0,  # checkpoints (shared or in the state dir) refused and set aside
         }
         if link_ttl is not None and link_ttl <= 0:
             raise ValueError(f"link_ttl must be > 0 seconds (or None: never release), not {link_ttl}")
@@ -255,8 +259,17 @@ class AgentDaemon:
             self.on_output(channel, msg)
 
     def event(self, world_id: str, kind: str, detail: str, reason: str = "") -> None:
-        """Publish an event about a world that has no link (yet)."""
-        self.publish("event", AgentEvent(self.agent_id, world_id, kind, detail, 0, time.time(), reason=reason))
+        """Publish an event about a world that has no link (yet), without declaring a publisher for it
+        (a flood of worlds that cannot be attached must not leave one declared publisher each)."""
+        msg = AgentEvent(self.agent_id, world_id, kind, detail, 0, time.time(), reason=reason)
+        key = keys.agent_event(self.agent_id, world_id)
+        try:
+            self.bus.put(key, codec.encode(msg), codec.schema_name(AgentEvent))
+        except Exception:
+            if not self.bus.closed:
+                log.exception("publishing on %s failed", key)
+        if self.on_output is not None:
+            self.on_output("event", msg)
 
     # bus callbacks (zenoh threads) -----------------------------------------------------------------
     # Observations are answered right in the subscriber callback by default: the lockstep world is
@@ -294,8 +307,24 @@ class AgentDaemon:
         owner, wid = parts[-3], parts[-1]
         if owner == self.owner_id:
             return
-        why = self.store.offer(owner, wid, msg.payload)
+        try:
+            shared = codec.decode(SharedCheckpoint, msg.payload)
+        except ProtocolError as e:
+            self.counters["bad_checkpoint"] += 1
+            log.warning("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], clip(str(e)))
+            return
+        if shared.world_id != wid:
+            self.counters["bad_checkpoint"] += 1
+            log.warning(
+                "checkpoint shared by %s on world %s's key is for world %s: refused",
+                owner[:64],
+                wid[:64],
+                clip(shared.world_id),
+            )
+            return
+        why = self.store.offer(owner, wid, shared.data)
         if why is not None:
+            self.counters["bad_checkpoint"] += 1
             log.warning("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], why)
 
     def _on_embedding(self, msg: BusMessage) -> None:
@@ -319,11 +348,22 @@ class AgentDaemon:
         return copy.data if copy is not None else b""
 
     # truth and world events for a world without a link are counted as `unattached`, like its
-    # observations; a refused one as bad_truth / bad_world_event (the link keeps its truth)
+    # observations (`others` when another owner answers it); a refused one as bad_truth /
+    # bad_world_event (the link keeps its truth)
+    def _taker(self, wid: str) -> WorldLink | None:
+        """The link that takes world `wid`'s truth and events here, or None after counting the message:
+        `others` when another owner answers the world (that owner takes and counts it; a paused link
+        left here from before a hand-off does not count it a second time), else `unattached`."""
+        link = self.links.get(wid)
+        elsewhere = wid not in self._claims and self.book.claimed_by_other(wid, self.owner_id)
+        if link is not None and (link.state == "attached" or not elsewhere):
+            return link
+        self.counters["others" if elsewhere else "unattached"] += 1
+        return None
+
     def _on_truth(self, msg: BusMessage) -> None:
-        link = self.links.get(keys.world_of(msg.key))
+        link = self._taker(keys.world_of(msg.key))
         if link is None:
-            self.counters["unattached"] += 1
             return
         try:
             truth = codec.decode(Truth, msg.payload)
@@ -335,9 +375,8 @@ class AgentDaemon:
         link.truth = truth
 
     def _on_world_event(self, msg: BusMessage) -> None:
-        link = self.links.get(keys.world_of(msg.key))
+        link = self._taker(keys.world_of(msg.key))
         if link is None:
-            self.counters["unattached"] += 1
             return
         try:
             ev = codec.decode(WorldEvent, msg.payload)
@@ -620,8 +659,21 @@ class AgentDaemon:
                     )
                 self.counters["share_oversize"] += 1
                 continue
+            shared = SharedCheckpoint(
+                wid,
+                encoded[1],
+                owner=self.owner_id,
+                epoch=link.epoch,
+                format_version=FORMAT_VERSION,
+                embedding_version=link.version,
+                saved_at=encoded[0],
+            )
             try:
-                self.bus.put(keys.agent_checkpoint(self.owner_id, wid), encoded[1], None)
+                self.bus.put(
+                    keys.agent_checkpoint(self.owner_id, wid),
+                    codec.encode(shared),
+                    codec.schema_name(SharedCheckpoint),
+                )
                 self._own_shared[wid] = encoded
                 n += 1
             except Exception as e:  # noqa: BLE001 - a closing bus: the next share will do
@@ -647,12 +699,6 @@ class AgentDaemon:
     def _claim(self, wid: str) -> None:
         tok = self.bus.token(claim_key(wid, self.owner_id))
         self._claims[wid] = (tok, time.monotonic())
-        if not self.all_obs and wid not in self._obs_subs:
-            self._obs_subs[wid] = [
-                self.bus.subscribe(keys.world_obs(wid), self._on_obs),
-                self.bus.subscribe(keys.world_truth(wid), self._on_truth),
-                self.bus.subscribe(keys.world_event(wid), self._on_world_event),
-            ]
         self.counters["claimed"] += 1
         log.info("owner %s claims world %s", self.owner_id, wid)
 
@@ -783,6 +829,7 @@ class AgentDaemon:
             {w: now - t for w, t in self.book.unclaimed_since.items()},
             known=known,
             avoid=frozenset(self._avoid) | frozenset(self._bad_ids),
+            failed=frozenset(self._failed),
             claim_delay=self.claim_delay,
             may_shed=now - self._last_shed >= 2.0 and now - self._started_mono >= 2.0,
         )
@@ -903,6 +950,15 @@ class AgentDaemon:
             previous.stop()
         self.links[wid] = att.link
         self._elsewhere.discard(wid)
+        if not self.all_obs and wid not in self._obs_subs:
+            # only now: a claimed world that cannot be attached (a fake one) costs no subscriber
+            # declarations, which every session on the bus would have to route; the lockstep world
+            # resends its observation until it is answered
+            self._obs_subs[wid] = [
+                self.bus.subscribe(keys.world_obs(wid), self._on_obs),
+                self.bus.subscribe(keys.world_truth(wid), self._on_truth),
+                self.bus.subscribe(keys.world_event(wid), self._on_world_event),
+            ]
         if self.threaded_links:
             att.link.start()
         log.info(
@@ -917,7 +973,7 @@ class AgentDaemon:
 
     def _attach_failed(self, wid: str, reason: str, e: Exception) -> None:
         self.counters["attach_failed"] += 1
-        log.warning("world %s: cannot attach: %s", wid, e)
+        log.warning("world %s: cannot attach: %s", wid, clip(str(e)))
         self.event(wid, EventKind.ATTACH_FAILED, str(e), reason)
 
     def _detach(self, wid: str) -> None:

@@ -31,6 +31,7 @@ from sensorimotor.protocol.messages import (
     Truth,
     WorldEvent,
     WorldSpec,
+    clip,
 )
 
 log = logging.getLogger("sme.agent")
@@ -215,7 +216,7 @@ class WorldLink:
         c = self.counters.rejected
         c[kind] = c.get(kind, 0) + 1
         if self._may_event():
-            log.warning("world %s: rejected input (%s): %s", self.world_id, kind, detail)
+            log.warning("world %s: rejected input (%s): %s", self.world_id, kind, clip(detail))
             self.event(EventKind.BAD_INPUT, detail, step, {"count": float(c[kind])}, reason=kind)
 
     def event(

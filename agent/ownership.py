@@ -107,6 +107,7 @@ def plan(
     *,
     known: frozenset[str] = frozenset(),
     avoid: frozenset[str] = frozenset(),
+    failed: frozenset[str] = frozenset(),
     claim_delay: float = 0.3,
     may_shed: bool = False,
 ) -> Plan:
@@ -127,6 +128,11 @@ def plan(
         previous owner of a returning world gets it back first).
     avoid : frozenset of str
         Worlds not to claim now (e.g. an attach just failed).
+    failed : frozenset of str
+        Worlds this owner claims but could not attach (a fake or broken world). They count as load
+        when deciding whether to claim more (so owners take turns with them), but an owner sheds only
+        when its *working* worlds exceed the least load by two, and never sheds a failed one: broken
+        worlds can never move a healthy one (in another owner's load they can only make it shed less).
     claim_delay : float
         Seconds a world must have been unclaimed before this owner claims it; multiplied by
         1 + this owner's rank among the least-loaded owners, so that ties rarely race.
@@ -146,9 +152,10 @@ def plan(
     loads = {o: view.load(o) for o in owners}
     loads[me] = len([w for w in held if w in view.worlds])
     least = min(loads.values())
+    healthy = {w for w in held - failed if w in view.worlds}
     shed = None
-    if may_shed and loads[me] >= least + 2 and held:
-        shed = max(held)  # deterministic: the last in id order
+    if may_shed and len(healthy) >= least + 2:
+        shed = max(healthy)  # deterministic: the last in id order
     claim: tuple[str, ...] = ()
     if loads[me] <= least and shed is None:
         tied = sorted(o for o, n in loads.items() if n == least)

@@ -64,6 +64,10 @@ class BusMessage(NamedTuple):
     kind: str = "put"  # "put" or "delete"
 
 
+READER_LEASE_MS = 1000  # see BusConfig.for_role
+BLOCKED_LINK_CLOSE_US = 1_000_000  # see BusConfig.zenoh_config
+
+
 @dataclass(frozen=True)
 class BusConfig:
     """How to open a session: mode, endpoints, and (with `secure_dir`) the credential to present.
@@ -83,6 +87,9 @@ class BusConfig:
     retry: bool = False  # client: wait for the router to appear instead of failing
     credential: str = "tool"
     secure_dir: str | None = None
+    # False for readers (record, watch, view): a reader that stalls must not hold the publishers'
+    # shared-memory buffers (their pool runs dry and the world's observations fall back to slow copies)
+    shared_memory: bool = True
 
     ROLES = ("agent", "world", "reader", "tool", "perturb")
 
@@ -113,7 +120,19 @@ class BusConfig:
         }
         if role in clients:
             retry, cred = clients[role]
-            return cls(mode="client", connect=(ep,), listen=(), retry=retry, credential=cred, secure_dir=secure_dir)
+            return cls(
+                mode="client",
+                connect=(ep,),
+                listen=(),
+                retry=retry,
+                credential=cred,
+                secure_dir=secure_dir,
+                shared_memory=role != "reader",
+                # a reader frozen or too slow to read its link holds up every BLOCK message routed to
+                # it; the router closes its link after this lease, the reader reconnects when it runs
+                # again and counts what it missed
+                lease_ms=READER_LEASE_MS if role == "reader" else None,
+            )
         raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
 
     def check_secure(self) -> security.Credential | None:
@@ -143,6 +162,15 @@ class BusConfig:
         cfg.insert_json5("scouting/gossip/enabled", "false" if self.mode != "router" else "true")
         if self.lease_ms:
             cfg.insert_json5("transport/link/tx/lease", str(int(self.lease_ms)))
+        if not self.shared_memory:
+            cfg.insert_json5("transport/shared_memory/enabled", "false")
+        if self.mode == "router" and not self.config_file:
+            # a link that cannot take a lockstep (BLOCK) message for this long is closed, so that a
+            # frozen reader stops the routing of the world's messages for at most this long (zenoh's
+            # default is 5 s); a live agent or worker drains its link in microseconds
+            cfg.insert_json5(
+                "transport/link/tx/queue/congestion_control/block/wait_before_close", str(BLOCKED_LINK_CLOSE_US)
+            )
         cred = self.check_secure()
         if cred is not None:
             tls = {
@@ -437,7 +465,11 @@ class Bus:
             Send at once instead of batching (lower latency).
         block : bool, default=True
             True (reliable, congestion BLOCK) for lockstep traffic; False drops under congestion
-            (for best-effort live views).
+            (for best-effort live views). A reader that stalls (a recorder, viewer or watcher frozen
+            or too slow) holds BLOCK traffic up for at most ~1 s: the agent's router closes a link
+            that cannot take a message for `BLOCKED_LINK_CLOSE_US` (zenoh's default: 5 s), readers
+            have a 1 s lease and no shared memory (see `BusConfig.for_role`); the reader reconnects
+            when it runs again and counts what it missed.
 
         Returns
         -------

@@ -51,6 +51,7 @@ SCHEMA_NAMES = {
     m.AgentStatus: "sme.v1.AgentStatus",
     m.LeaseRequest: "sme.v1.LeaseRequest",
     m.Lease: "sme.v1.Lease",
+    m.SharedCheckpoint: "sme.v1.Checkpoint",
 }
 
 
@@ -236,10 +237,10 @@ def _enc_event(x: m.AgentEvent) -> pb.AgentEvent:
         agent_id=x.agent_id,
         world_id=x.world_id,
         kind=x.kind,
-        detail=x.detail,
+        detail=m.clip(x.detail),
         step=x.step,
         timestamp=x.timestamp,
-        reason=x.reason,
+        reason=m.clip(x.reason, 100),
     )
     p.values.update({k: float(v) for k, v in x.values.items()})
     if x.config is not None:
@@ -255,8 +256,8 @@ def _enc_world_event(x: m.WorldEvent) -> pb.WorldEvent:
         world_id=x.world_id,
         session=x.session,
         kind=x.kind,
-        reason=x.reason,
-        detail=x.detail,
+        reason=m.clip(x.reason, 100),
+        detail=m.clip(x.detail),
         step=x.step,
         timestamp=x.timestamp,
         control_id=x.control_id,
@@ -291,6 +292,21 @@ def _enc_lease(x: m.Lease) -> pb.Lease:
         reason=x.reason,
         ttl=x.ttl,
         timestamp=x.timestamp,
+    )
+
+
+def _enc_checkpoint(x: m.SharedCheckpoint) -> pb.Checkpoint:
+    if len(x.data) > MAX_TENSOR_BYTES:
+        raise errors.OversizeMessage(f"Checkpoint: {len(x.data)} bytes of data, at most {MAX_TENSOR_BYTES}")
+    return pb.Checkpoint(
+        schema_version=m.SCHEMA_VERSION,
+        world_id=x.world_id,
+        owner=x.owner,
+        epoch=x.epoch,
+        format_version=x.format_version,
+        embedding_version=x.embedding_version,
+        saved_at=_finite(x.saved_at, "Checkpoint.saved_at"),
+        data=x.data,
     )
 
 
@@ -507,6 +523,20 @@ def _dec_lease(p: pb.Lease) -> m.Lease:
     )
 
 
+def _dec_checkpoint(p: pb.Checkpoint) -> m.SharedCheckpoint:
+    if len(p.data) > MAX_TENSOR_BYTES:
+        raise errors.OversizeMessage(f"Checkpoint: {len(p.data)} bytes of data, at most {MAX_TENSOR_BYTES}")
+    return m.SharedCheckpoint(
+        p.world_id,
+        p.data,
+        p.owner,
+        p.epoch,
+        p.format_version,
+        p.embedding_version,
+        _finite(p.saved_at, "Checkpoint.saved_at"),
+    )
+
+
 def _dec_status(p: pb.AgentStatus) -> m.AgentStatus:
     links = tuple(
         m.LinkStatus(
@@ -541,6 +571,7 @@ _CODECS: dict[type, tuple[type, Callable[[Any], Any], Callable[[Any], Any]]] = {
     m.AgentStatus: (pb.AgentStatus, _enc_status, _dec_status),
     m.LeaseRequest: (pb.LeaseRequest, _enc_lease_request, _dec_lease_request),
     m.Lease: (pb.Lease, _enc_lease, _dec_lease),
+    m.SharedCheckpoint: (pb.Checkpoint, _enc_checkpoint, _dec_checkpoint),
 }
 
 

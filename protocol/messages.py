@@ -8,6 +8,16 @@ from enum import StrEnum
 import numpy as np
 
 SCHEMA_VERSION = 1
+MAX_ECHO = 1000  # characters of its input an event's detail or a log line copies at most (see `clip`)
+
+
+def clip(text: str, limit: int = MAX_ECHO) -> str:
+    """`text` cut to `limit` characters with a note of how much was left out: events and log lines
+    say what input they refused without copying all of it (1 MB in must not make a 1 MB event)."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... [{len(text) - limit} more characters not shown]"
+
 
 #: `WorldSpec.program` of a world driven by an outside controller (`sme world --external`, a
 #: Gymnasium `BusEnv`): agents do not attach to it
@@ -514,6 +524,37 @@ class Lease:
     reason: str = ""
     ttl: float = 0.0
     timestamp: float = 0.0
+
+
+@dataclass(frozen=True)
+class SharedCheckpoint:
+    """One owner's learned state of one world, shared on the bus (`sme.v1.Checkpoint`).
+
+    Attributes
+    ----------
+    world_id : str
+        The world the state was learned on (it must match the key it arrives on).
+    data : bytes
+        A checkpoint file (the .npz of `agent.checkpoint`), at most `codec.MAX_TENSOR_BYTES`.
+    owner : str
+        The owner id that shares it ("" when unknown).
+    epoch : int
+        The owner's lease epoch on the world; 0 until owners hold leases (protocol/README.md, "Owners").
+    format_version : int
+        The checkpoint file format version inside `data`.
+    embedding_version : int
+        The embedding version the state had published.
+    saved_at : float
+        Seconds since the Unix epoch when the state was taken.
+    """
+
+    world_id: str
+    data: bytes
+    owner: str = ""
+    epoch: int = 0
+    format_version: int = 0
+    embedding_version: int = 0
+    saved_at: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -350,6 +350,26 @@ class Lease(_message.Message):
     timestamp: float
     def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., session: _Optional[str] = ..., holder: _Optional[str] = ..., epoch: _Optional[int] = ..., granted: _Optional[bool] = ..., reason: _Optional[str] = ..., ttl: _Optional[float] = ..., timestamp: _Optional[float] = ...) -> None: ...
 
+class Checkpoint(_message.Message):
+    __slots__ = ("schema_version", "world_id", "owner", "epoch", "format_version", "embedding_version", "saved_at", "data")
+    SCHEMA_VERSION_FIELD_NUMBER: _ClassVar[int]
+    WORLD_ID_FIELD_NUMBER: _ClassVar[int]
+    OWNER_FIELD_NUMBER: _ClassVar[int]
+    EPOCH_FIELD_NUMBER: _ClassVar[int]
+    FORMAT_VERSION_FIELD_NUMBER: _ClassVar[int]
+    EMBEDDING_VERSION_FIELD_NUMBER: _ClassVar[int]
+    SAVED_AT_FIELD_NUMBER: _ClassVar[int]
+    DATA_FIELD_NUMBER: _ClassVar[int]
+    schema_version: int
+    world_id: str
+    owner: str
+    epoch: int
+    format_version: int
+    embedding_version: int
+    saved_at: float
+    data: bytes
+    def __init__(self, schema_version: _Optional[int] = ..., world_id: _Optional[str] = ..., owner: _Optional[str] = ..., epoch: _Optional[int] = ..., format_version: _Optional[int] = ..., embedding_version: _Optional[int] = ..., saved_at: _Optional[float] = ..., data: _Optional[bytes] = ...) -> None: ...
+
 class LinkStatus(_message.Message):
     __slots__ = ("world_id", "kind", "program", "state", "steps", "episodes", "embedding_version", "reward_mean", "rejected", "last_procrustes_error", "detector_statistic", "drops", "dropped")
     class RejectedEntry(_message.Message):

@@ -49,6 +49,53 @@ def open_output(path: str) -> BinaryIO:
         raise OSError(e.errno, f"cannot record to {path}: {e.strerror or e}") from None
 
 
+def observation_step(payload: bytes, world_id: str | None = None) -> int | None:
+    """The `step` (field 4) of an encoded Observation, read without decoding the tensors; None
+    when the bytes do not start like one of schema version 1 (fields 1-4 in order, as every
+    encoder writes them) or, with `world_id`, are for another world: only real observations count."""
+    i, n = 0, len(payload)
+    version, wid, step = 0, "", 0
+    while i < n:
+        tag, i = _varint(payload, i)
+        if tag is None:
+            return None
+        field, wire = tag >> 3, tag & 7
+        if field > 4:
+            break
+        if wire == 0 and field in (1, 3, 4):
+            value, i = _varint(payload, i)
+            if value is None:
+                return None
+            if field == 1:
+                version = value
+            elif field == 4:
+                step = value
+                break
+        elif wire == 2 and field == 2:
+            size, i = _varint(payload, i)
+            if size is None or i + size > n:
+                return None
+            wid = payload[i : i + size].decode("utf-8", "replace")
+            i += size
+        else:
+            return None
+    if version != 1 or (world_id is not None and wid != world_id):
+        return None
+    return step  # proto3 leaves a 0 out
+
+
+def _varint(data: bytes, i: int) -> tuple[int | None, int]:
+    value, shift = 0, 0
+    while i < len(data) and shift < 64:
+        b = data[i]
+        i += 1
+        value |= (b & 0x7F) << shift
+        if not b & 0x80:
+            return value, i
+        shift += 7
+    return None, i
+
+
 class Recorder:
     """Subscribes to `key_expr` and writes every message on one writer thread. Chunks are closed
     and pushed to the OS at least every `flush_every` seconds (0.2 s), so a
@@ -61,7 +108,13 @@ class Recorder:
     A write, flush or finish that fails (a full disk) stops the writing: `error` says why (it
     contains "disk full" for ENOSPC), `failed` is set, further messages are dropped, and the file
     keeps everything up to its last complete chunk. `stream` is an already opened file (see
-    `open_output`); by default `path` is opened here."""
+    `open_output`); by default `path` is opened here.
+
+    A recorder never slows the session it records: the bus drops the messages a stalled reader
+    cannot take (see `Bus.publisher`), and messages that arrive faster than the file is written
+    wait in a backlog of at most `max_backlog_bytes`; beyond it new ones are dropped. Both losses
+    are counted: `dropped` (backlog full) and `lost` (observation steps of a world that never
+    arrived: gaps in its step counter, e.g. after the recorder was frozen)."""
 
     def __init__(
         self,
@@ -73,8 +126,10 @@ class Recorder:
         flush_every: float = 0.2,
         trim_every: float = 10.0,
         stream: BinaryIO | None = None,
+        max_backlog_bytes: int = 256 * 1024 * 1024,
     ) -> None:
         self.bus = bus
+        self.max_backlog_bytes = max_backlog_bytes
         self.path = path
         self.key_expr = key_expr
         self.flush_every = flush_every
@@ -93,6 +148,10 @@ class Recorder:
         self.received = 0
         self.by_key: collections.Counter[str] = collections.Counter()
         self.max_backlog = 0
+        self.dropped = 0  # messages dropped because the backlog was full
+        self.lost = 0  # observation steps missing from a world's sequence (never reached the recorder)
+        self._backlog_bytes = 0
+        self._last_step: dict[str, int] = {}  # obs key -> last observation step seen
         self._worlds: set[str] = set()
         self._seq = 0
 
@@ -106,11 +165,28 @@ class Recorder:
     def _on(self, msg: BusMessage) -> None:
         if msg.kind != "put" or self.failed.is_set():
             return
+        if msg.key.endswith("/obs"):
+            self._count_gap(msg)
         with self._cv:
-            self._queue.append((time.time_ns(), msg))
             self.received += 1
+            if self._backlog_bytes + len(msg.payload) > self.max_backlog_bytes:
+                self.dropped += 1
+                return
+            self._queue.append((time.time_ns(), msg))
+            self._backlog_bytes += len(msg.payload)
             self.max_backlog = max(self.max_backlog, len(self._queue))
             self._cv.notify()
+
+    def _count_gap(self, msg: BusMessage) -> None:
+        """Count the observation steps of a world that never reached the recorder (a lockstep world
+        numbers them 1, 2, 3, ...; a resend repeats one; a restarted world starts again lower)."""
+        step = observation_step(msg.payload, msg.key.split("/")[-2])
+        if step is None:
+            return
+        last = self._last_step.get(msg.key)
+        if last is not None and step > last + 1:
+            self.lost += step - last - 1
+        self._last_step[msg.key] = step
 
     def _on_alive(self, key: str, alive: bool) -> None:
         wid = keys.last_chunk(key)
@@ -153,6 +229,7 @@ class Recorder:
                     self._cv.wait(0.2)
                 batch = list(self._queue)
                 self._queue.clear()
+                self._backlog_bytes = 0
             for t, msg in batch:
                 self._seq += 1
                 self._sink.write(Record(msg.key, schema_of(msg.encoding), t, msg.payload, self._seq))
@@ -252,8 +329,9 @@ def main_args(args: argparse.Namespace) -> int:
                 break
             if el >= next_tick:
                 next_tick += 5.0
+                lossy = f", lost {rec.lost} observation steps, dropped {rec.dropped}" if rec.lost or rec.dropped else ""
                 print(
-                    f"  {el:5.0f} s  {rec.written} messages written ({rec.received / el:,.0f}/s)",
+                    f"  {el:5.0f} s  {rec.written} messages written ({rec.received / el:,.0f}/s){lossy}",
                     file=sys.stderr,
                     flush=True,
                 )
@@ -269,7 +347,8 @@ def main_args(args: argparse.Namespace) -> int:
         return 1
     print(
         f"sme record: {rec.written} messages in {el:.1f} s ({rec.written / max(el, 1e-9):,.0f}/s), "
-        f"{len(rec.by_key)} channels, received {rec.received}, max backlog {rec.max_backlog}",
+        f"{len(rec.by_key)} channels, received {rec.received}, max backlog {rec.max_backlog}, "
+        f"lost {rec.lost} observation steps (never reached the recorder), dropped {rec.dropped} (backlog full)",
         file=sys.stderr,
     )
     return 0

@@ -36,6 +36,7 @@ from sensorimotor.protocol.messages import (
     WorldEvent,
     WorldEventKind,
     WorldSpec,
+    clip,
 )
 from sensorimotor.worlds.base import PerturbationError, World
 from sensorimotor.worlds.lease import LeaseCounts, LeaseKeeper
@@ -194,7 +195,7 @@ class WorldNode:
     # bus callbacks (zenoh threads) -------------------------------------------------------------
     def _reject(self, kind: str, msg: str) -> None:
         self.stats.rejected[kind] = self.stats.rejected.get(kind, 0) + 1
-        log.warning("world %s: rejected input: %s", self.world_id, msg)
+        log.warning("world %s: rejected input: %s", self.world_id, clip(msg))
 
     def _on_action(self, msg: BusMessage) -> None:
         try:

@@ -63,6 +63,7 @@ CATEGORIES: dict[str, tuple[float, str]] = {
     "attach": (8, "attach_failed"),
 }
 COUNTERS = ("rejected", "bad_truth", "bad_world_event", "unattached", "attach_failed")
+OWNERSHIP = ("shed", "lost", "taken_over")  # the agent's hand-off counters (claim races on fake worlds count in `lost`)
 BIG_EVERY = 1000  # every BIG_EVERY-th observation message is a real tensor over the 32 MiB limit
 
 
@@ -84,6 +85,13 @@ class Result:
     good_world: dict[str, Any] = field(default_factory=dict)
     agent_alive: bool = True
     tracebacks: int = 0
+    baseline_steps_per_s: float = 0.0  # the good world's step rate without hostile messages: mean of before and after
+    baseline_before: float = 0.0  # its step rate in a window as long as the fuzz, just before it
+    baseline_after: float = 0.0  # and in one after the counters settled (the machine's load drifts)
+    fuzz_steps_per_s: float = 0.0  # its step rate while the hostile messages were sent
+    step_rate_ratio: float = 0.0  # fuzz / baseline (the bar: >= 0.8)
+    handoffs: int = 0  # claims of the good world declared or withdrawn during the fuzz (the bar: 0)
+    ownership: dict[str, int] = field(default_factory=dict)  # the owners' shed/lost/taken_over increase
 
     def as_dict(self) -> dict[str, Any]:
         d = dict(self.__dict__)
@@ -370,7 +378,7 @@ def _counts(st: AgentStatus | None) -> dict[str, int]:
         raise RuntimeError("the agent did not answer the status query")
     link = next((ln for ln in st.links if ln.world_id == GOOD), None)
     rejected = dict(link.rejected) if link is not None else {}
-    out = {c: int(st.counters.get(c, 0)) for c in COUNTERS if c != "rejected"}
+    out = {c: int(st.counters.get(c, 0)) for c in (*COUNTERS, *OWNERSHIP) if c != "rejected"}
     out["rejected"] = sum(rejected.values())
     out.update({f"rejected.{k}": v for k, v in rejected.items()})
     return out
@@ -426,8 +434,16 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
             if not link:
                 raise RuntimeError("the good world did not attach to the agent within 120 s")
             spec = codec.decode(WorldSpec, bus.get(keys.world_spec(GOOD), timeout=5.0)[0].payload)
-            before = _counts(_status(bus))
-            version_before = link.embedding_version
+
+            def good_steps() -> tuple[float, int]:
+                ln = _good_link(_status(bus))
+                if ln is None:
+                    raise RuntimeError("the good world's link is gone from the agent's status")
+                return time.perf_counter(), int(ln.steps)
+
+            def steps_per_s(a: tuple[float, int], b: tuple[float, int]) -> float:
+                return round((b[1] - a[1]) / (b[0] - a[0]), 1) if b[0] > a[0] else 0.0
+
             fz = Fuzzer(spec, seed)
             pubs: dict[str, Any] = {}
 
@@ -443,46 +459,68 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
             sent: Counter[str] = Counter()
             variants: Counter[str] = Counter()
             expected_kinds: Counter[str] = Counter()
-            t0 = time.perf_counter()
+            # every message is built and checked before the clock starts, so that the generator's own
+            # work does not take the cores from the agent and the world while the step rate is measured
+            todo: list[tuple[str, str, bytes | None]] = []  # (category, key or fake world id, payload)
             for i, ci in enumerate(plan):
                 cat = cats[int(ci)]
                 if cat.startswith("obs_"):
-                    payload = fz.observation(cat)
-                    kind = _obs_kind(payload, spec)
+                    built = fz.observation(cat)
+                    kind = _obs_kind(built, spec)
                     assert kind is not None, f"generated an observation the agent would accept ({cat})"
                     expected_kinds[kind] += 1
-                    put(keys.world_obs(GOOD), payload)
+                    todo.append((cat, keys.world_obs(GOOD), built))
                 elif cat == "truth_bad":
-                    payload = fz.truth()
-                    assert _truth_refused(payload), "generated a truth the agent would accept"
-                    put(keys.world_truth(GOOD), payload)
+                    built = fz.truth()
+                    assert _truth_refused(built), "generated a truth the agent would accept"
+                    todo.append((cat, keys.world_truth(GOOD), built))
                 elif cat == "event_bad":
-                    payload = fz.world_event()
-                    assert _event_refused(payload), "generated a world event the agent would accept"
-                    put(keys.world_event(GOOD), payload)
+                    built = fz.world_event()
+                    assert _event_refused(built), "generated a world event the agent would accept"
+                    todo.append((cat, keys.world_event(GOOD), built))
                 elif cat == "unattached":
-                    put(*fz.unattached(i))
+                    todo.append((cat, *fz.unattached(i)))
                 else:
                     variant = Fuzzer.ATTACH_VARIANTS[int(fz.rng.integers(len(Fuzzer.ATTACH_VARIANTS)))]
                     variants[variant] += 1
                     if variant == "bad_id":  # a legal key chunk, not a legal world id
                         wid = str(fz.rng.choice([f"fz~{i}", f"fz {i}", "f" * 65 + str(i), f"fz@{i}"]))
-                    else:
-                        wid = f"fz-{i}"
-                        data = b"" if variant == "error_reply" else fz.fake_spec(wid, variant)
+                        todo.append((cat, wid, None))
+                    else:  # an empty spec: the fake world answers with an error reply
+                        todo.append(
+                            (cat, f"fz-{i}", b"" if variant == "error_reply" else fz.fake_spec(f"fz-{i}", variant))
+                        )
 
-                        def answer(k: str, p: bytes | None, data: bytes = data) -> bytes:
+            # the baseline: the same agent and world, as long as the fuzz is meant to last, no hostile message
+            b0 = good_steps()
+            time.sleep(messages / rate)
+            res.baseline_before = steps_per_s(b0, good_steps())
+            before = _counts(_status(bus))
+            version_before = link.embedding_version
+            good_claims: list[tuple[str, bool]] = []  # claim tokens of the good world seen during the fuzz
+            handles.append(bus.watch_alive(keys.alive_claim(GOOD, "*"), lambda k, a: good_claims.append((k, a)), False))
+            f0 = good_steps()
+            t0 = time.perf_counter()
+            for i, (cat, where, payload) in enumerate(todo):
+                if cat != "attach":
+                    assert payload is not None
+                    put(where, payload)
+                else:
+                    if payload is not None:
+
+                        def answer(k: str, p: bytes | None, data: bytes = payload) -> bytes:
                             if not data:
                                 raise LookupError("this fake world has no spec")  # an error reply
                             return data
 
-                        handles.append(bus.queryable(keys.world_spec(wid), answer, codec.schema_name(WorldSpec)))
-                    handles.append(bus.token(keys.alive_world(wid)))
+                        handles.append(bus.queryable(keys.world_spec(where), answer, codec.schema_name(WorldSpec)))
+                    handles.append(bus.token(keys.alive_world(where)))
                 sent[cat] += 1
                 ahead = (i + 1) / rate - (time.perf_counter() - t0)
                 if ahead > 0:
                     time.sleep(ahead)
             res.seconds = round(time.perf_counter() - t0, 3)
+            res.fuzz_steps_per_s = steps_per_s(f0, good_steps())
             res.rate = round(messages / res.seconds, 1) if res.seconds else 0.0
             res.sent = sum(sent.values())
             res.categories = dict(sorted(sent.items()))
@@ -510,6 +548,14 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
                 k.split(".", 1)[1]: v for k, v in sorted(d.items()) if k.startswith("rejected.") and v
             }
             res.counted = sum(res.counters.values())
+            res.handoffs = len(good_claims)
+            res.ownership = {c: d.get(c, 0) for c in OWNERSHIP}
+            a0 = good_steps()
+            time.sleep(messages / rate)
+            res.baseline_after = steps_per_s(a0, good_steps())
+            res.baseline_steps_per_s = round((res.baseline_before + res.baseline_after) / 2, 1)
+            if res.baseline_steps_per_s > 0:
+                res.step_rate_ratio = round(res.fuzz_steps_per_s / res.baseline_steps_per_s, 3)
             good = _wait(
                 lambda: (ln := _good_link(_status(bus))) is not None and ln.last_procrustes_error < 0.05 and ln,
                 converge,
@@ -550,20 +596,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(messages: int, seed: int = 0, rate: float = 1000.0, as_json: bool = False) -> int:
-    """Run the fuzz and print its result; exit 0 when every message was counted, nothing crashed
-    and the good world's embedding error is under 0.05, else 1."""
+    """Run the fuzz and print its result; exit 0 when every message was counted, nothing crashed,
+    the good world's embedding error is under 0.05, its step rate kept 80 % of the baseline's and no
+    world was handed off, else 1."""
     r = run(messages, seed, rate)
     if as_json:
         print(json.dumps(r.as_dict()))
     else:
         print(
             f"sent {r.sent} in {r.seconds} s ({r.rate}/s), counted {r.counted}, crashes {r.crashes}, "
-            f"good world Procrustes {_num(r.good_world_procrustes)}"
+            f"good world Procrustes {_num(r.good_world_procrustes)}, its step rate {r.fuzz_steps_per_s}/s "
+            f"against {r.baseline_steps_per_s}/s without fuzz (ratio {r.step_rate_ratio}), hand-offs {r.handoffs}"
         )
         for c in COUNTERS:
             print(f"  {c:<16} expected {r.expected.get(c, 0):>6}  counted {r.counters.get(c, 0):>6}")
         print(f"  rejected by kind: {r.rejected_kinds}")
-    ok = r.crashes == 0 and r.counted == r.sent and r.good_world_procrustes < 0.05
+    ok = (
+        r.crashes == 0
+        and r.counted == r.sent
+        and r.good_world_procrustes < 0.05
+        and r.step_rate_ratio >= 0.8
+        and r.handoffs == 0
+    )
     return 0 if ok else 1
 
 
