@@ -10,8 +10,8 @@ from sensorimotor.agent.attach import attach
 from sensorimotor.agent.checkpoint import Checkpoint, encode_checkpoint
 from sensorimotor.agent.checkpoint_store import SharedCheckpoints, ShareSchedule
 from sensorimotor.agent.daemon import AgentDaemon
-from sensorimotor.protocol import keys
-from sensorimotor.protocol.messages import Embedding, EventKind
+from sensorimotor.protocol import codec, keys
+from sensorimotor.protocol.messages import Embedding, EventKind, SharedCheckpoint
 from sensorimotor.worlds.gridworld import GridWorld
 
 
@@ -108,8 +108,11 @@ def test_a_new_embedding_version_is_shared_soon_and_at_most_once_per_interval():
     d.publish("embedding", embedding("g1", 2))
     assert d.share_new_versions(now=101.0) == 0  # within 2 s of the last share
     assert d.share_new_versions(now=102.5) == 1 and d.counters["shared_on_embedding"] == 2
-    # the copy it answers queries with is its own last share
-    assert d._answer_checkpoint(keys.agent_checkpoint("a", "g1"), None) == bus.puts[-1][1]
+    # the copy it answers queries with is its own last share (the checkpoint file inside the
+    # sme.v1.Checkpoint message that went on the bus)
+    shared = codec.decode(SharedCheckpoint, bus.puts[-1][1])
+    assert shared.world_id == "g1" and shared.owner == "a" and shared.embedding_version == 2
+    assert d._answer_checkpoint(keys.agent_checkpoint("a", "g1"), None) == shared.data
     assert d._answer_checkpoint(keys.agent_checkpoint("a", "g9"), None) == b""
     # nothing over the size bound goes on the bus
     small = AgentDaemon(_Bus(), owner_id="a", share_max_bytes=100)  # type: ignore[arg-type]
