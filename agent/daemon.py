@@ -781,7 +781,15 @@ class AgentDaemon:
             self.counters["released"] += 1
             self.counters["dropped"] += link.dropped
             released.append(wid)
-            if self.state_dir:
+            if self.state_dir and wid in self._elsewhere:
+                log.info(
+                    "world %s gone %.0f s (link ttl %g s): link released, not checkpointed here (another owner "
+                    "answered it since: its state is that owner's)",
+                    wid,
+                    now - since,
+                    self.link_ttl,
+                )
+            elif self.state_dir and os.path.exists(self._checkpoint_path(self.state_dir, wid)):
                 log.info(
                     "world %s gone %.0f s (link ttl %g s): checkpointed to %s and released; it is restored "
                     "from there if it returns",
