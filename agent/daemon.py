@@ -239,9 +239,9 @@ class AgentDaemon:
         key = keys.agent_event(self.agent_id, world_id)
         try:
             self.bus.put(key, codec.encode(msg), codec.schema_name(AgentEvent))
-        except Exception:
-            if not self.bus.closed:
-                log.exception("publishing on %s failed", key)
+        except Exception as e:  # noqa: BLE001 - an event is never worth stopping for
+            if not getattr(self.bus, "closed", False):
+                log.warning("publishing on %s failed: %s", key, e)
         if self.on_output is not None:
             self.on_output("event", msg)
 
@@ -472,6 +472,10 @@ class AgentDaemon:
             return None
 
         def set_aside(why: str, reason: str) -> None:
+            self.counters["bad_checkpoint"] += 1
+            self.event(
+                spec.world_id, EventKind.BAD_INPUT, clip(f"checkpoint {path} set aside: {reason}"), "bad_checkpoint"
+            )
             try:
                 aside = set_aside_checkpoint(path, why)
             except OSError as e:
