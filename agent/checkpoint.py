@@ -20,19 +20,29 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
+import time
+import zipfile
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
+from sensorimotor.protocol.keys import check_id
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, WorldSpec
 
 FORMAT = "sensorimotor-checkpoint"
 FORMAT_VERSION = 1
 META_ENTRY = "checkpoint.json"
 ARRAY_MARK = "__array__"
+
+
+MAX_CHECKPOINT_BYTES = 32 * 1024 * 1024  # a checkpoint file (or shared copy) larger than this is refused unread
+MAX_INFLATED_BYTES = 256 * 1024 * 1024  # the sum of the zip entries' declared sizes, checked before inflating
+MAX_CLOCK_SKEW = 300.0  # seconds a checkpoint may be dated in the future (clocks of other hosts)
+MAX_COUNTER = 2**53  # version and steps above this are not counts any run can reach
 
 
 class CheckpointError(Exception):
@@ -229,11 +239,58 @@ def _require(meta: dict, key: str, kind: type | tuple[type, ...]) -> Any:
     return value
 
 
-def decode_checkpoint(data: bytes) -> Checkpoint:
-    """Parse a checkpoint file's bytes; CheckpointError says what is wrong with anything else."""
+def _check_sizes(data: bytes) -> None:
+    """Refuse, before anything is inflated, a file over MAX_CHECKPOINT_BYTES or whose zip entries
+    declare more than MAX_INFLATED_BYTES (a small file that inflates to hundreds of MB)."""
+    if len(data) > MAX_CHECKPOINT_BYTES:
+        raise CheckpointError(f"too large: {len(data)} bytes, at most {MAX_CHECKPOINT_BYTES}")
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as z:
+            infos = z.infolist()
+    except Exception as e:  # noqa: BLE001 - BadZipFile, NotImplementedError (unknown zip versions), ...
+        raise CheckpointError(f"unreadable (truncated or corrupt?): {type(e).__name__}: {e}") from None
+    declared = sum(i.file_size for i in infos)
+    if declared > MAX_INFLATED_BYTES:
+        raise CheckpointError(f"its entries would inflate to {declared} bytes, at most {MAX_INFLATED_BYTES}")
+
+
+def check_values(ckpt: Checkpoint, now: float | None = None) -> None:
+    """Refuse a checkpoint that parses but whose values cannot be right: a world id that is not an
+    id, counters out of range, non-finite arrays, a time in the future (beyond MAX_CLOCK_SKEW)."""
+    try:
+        check_id(ckpt.world_id, "world id")
+    except ValueError as e:
+        raise CheckpointError(str(e)) from None
+    for name, value in (("version", ckpt.version), ("steps", ckpt.steps)):
+        if not 0 <= value < MAX_COUNTER:
+            raise CheckpointError(f"its {name} {value} is out of range (0 .. 2**53)")
+    now = time.time() if now is None else now
+    if not (math.isfinite(ckpt.saved_at) and 0 <= ckpt.saved_at <= now + MAX_CLOCK_SKEW):
+        raise CheckpointError(f"it is dated {ckpt.saved_at!r}: not a time up to now (+{MAX_CLOCK_SKEW:g} s)")
+    for path, a in _arrays(
+        {"program_params": ckpt.program_params, "program_state": ckpt.program_state, "detector": ckpt.detector_state}
+    ):
+        if a.dtype.kind in "fc" and not np.isfinite(a).all():
+            raise CheckpointError(f"the array {path} holds NaN or infinite values")
+
+
+def _arrays(value: Any, path: str = "") -> list[tuple[str, np.ndarray]]:
+    if isinstance(value, np.ndarray):
+        return [(path, value)]
+    if isinstance(value, dict):
+        return [x for k, v in value.items() for x in _arrays(v, f"{path}.{k}" if path else str(k))]
+    if isinstance(value, list):
+        return [x for i, v in enumerate(value) for x in _arrays(v, f"{path}.{i}")]
+    return []
+
+
+def decode_checkpoint(data: bytes, now: float | None = None) -> Checkpoint:
+    """Parse a checkpoint file's bytes and check its values (`check_values`, with `now` as the
+    current time); CheckpointError says what is wrong with anything else."""
     if data[:2] != b"PK":
         hint = " (a pickle? those are never loaded)" if data[:1] == b"\x80" else ""
         raise CheckpointError(f"not a checkpoint: not an npz (zip) file{hint}")
+    _check_sizes(data)
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             if META_ENTRY not in npz.files:
@@ -281,9 +338,11 @@ def decode_checkpoint(data: bytes) -> Checkpoint:
     if detector is not None and not isinstance(detector, dict):
         raise CheckpointError("the entry 'detector_state' has the wrong type")
     try:
-        return _checkpoint(meta, sensors, action_space, detector, arrays)
+        ckpt = _checkpoint(meta, sensors, action_space, detector, arrays)
+        check_values(ckpt, now)
     except RecursionError:  # JSON nested just under json's limit, deeper than the stack left here
         raise CheckpointError("the state entries are nested too deeply") from None
+    return ckpt
 
 
 def _checkpoint(
@@ -343,6 +402,9 @@ def read_checkpoint(path: str) -> Checkpoint:
     """
     try:
         with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if size > MAX_CHECKPOINT_BYTES:
+                raise CheckpointError(f"too large: {size} bytes, at most {MAX_CHECKPOINT_BYTES}")
             data = f.read()
     except OSError as e:
         raise CheckpointError(f"cannot read: {e}") from None

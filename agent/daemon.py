@@ -211,6 +211,7 @@ class AgentDaemon:
         self._started = time.time()
         self._started_mono = time.monotonic()
         self._pubs: dict[str, Any] = {}
+        self._versions: dict[str, int] = {}  # world -> embedding version high-water mark written
         self._lock = threading.Lock()
         if state_dir:
             os.makedirs(state_dir, exist_ok=True)
@@ -244,6 +245,7 @@ class AgentDaemon:
             key = keys.world_act(wid)
         elif channel == "embedding":
             key = keys.agent_embedding(self.agent_id, wid)
+            self._persist_version(wid, msg.version)  # before it is published: never reused after a kill
         else:
             key = keys.agent_event(self.agent_id, wid)
         try:
@@ -258,6 +260,32 @@ class AgentDaemon:
         if self.on_output is not None and channel != "act":
             self.on_output(channel, msg)
 
+    # embedding versions: a high-water mark per world in the state dir, written before each version is
+    # published, so that a link restored from an older checkpoint (a kill -9 since) goes on above it
+    def _version_path(self, wid: str) -> str:
+        return os.path.join(str(self.state_dir), f"{wid}.version")
+
+    def _persist_version(self, wid: str, version: int) -> None:
+        if not self.state_dir or version <= self._versions.get(wid, -1):
+            return
+        try:
+            write_atomically(self._version_path(wid), f"{version}\n".encode())
+            self._versions[wid] = version
+        except OSError as e:  # a full disk: the version is still published; a restart may reuse it
+            log.error("world %s: embedding version high-water mark not written (%s)", wid, e)
+
+    def _version_floor(self, wid: str) -> int:
+        """The highest embedding version this state dir has seen published for `wid` (0: none)."""
+        if not self.state_dir:
+            return 0
+        try:
+            with open(self._version_path(wid), "rb") as f:
+                text = f.read(32).decode("ascii").strip()
+            value = int(text)
+        except (OSError, ValueError, UnicodeDecodeError):
+            return 0
+        return value if 0 <= value < 2**53 else 0
+
     def event(self, world_id: str, kind: str, detail: str, reason: str = "") -> None:
         """Publish an event about a world that has no link (yet), without declaring a publisher for it
         (a flood of worlds that cannot be attached must not leave one declared publisher each)."""
@@ -265,9 +293,9 @@ class AgentDaemon:
         key = keys.agent_event(self.agent_id, world_id)
         try:
             self.bus.put(key, codec.encode(msg), codec.schema_name(AgentEvent))
-        except Exception:
-            if not self.bus.closed:
-                log.exception("publishing on %s failed", key)
+        except Exception as e:  # noqa: BLE001 - an event is never worth stopping for
+            if not getattr(self.bus, "closed", False):
+                log.warning("publishing on %s failed: %s", key, e)
         if self.on_output is not None:
             self.on_output("event", msg)
 
@@ -550,6 +578,10 @@ class AgentDaemon:
             return None
 
         def set_aside(why: str, reason: str) -> None:
+            self.counters["bad_checkpoint"] += 1
+            self.event(
+                spec.world_id, EventKind.BAD_INPUT, clip(f"checkpoint {path} set aside: {reason}"), "bad_checkpoint"
+            )
             try:
                 aside = set_aside_checkpoint(path, why)
             except OSError as e:
@@ -948,6 +980,10 @@ class AgentDaemon:
         att.link.set_lease(self.owner_id, epoch)
         if previous is not None and att.link is not previous:
             previous.stop()
+        floor = self._version_floor(wid)
+        if att.link.version < floor:
+            log.info("world %s: embedding versions go on from v%d (published before a restart)", wid, floor)
+            att.link.version = floor
         self.links[wid] = att.link
         self._elsewhere.discard(wid)
         if not self.all_obs and wid not in self._obs_subs:
@@ -1011,7 +1047,15 @@ class AgentDaemon:
             self.counters["released"] += 1
             self.counters["dropped"] += link.dropped
             released.append(wid)
-            if self.state_dir:
+            if self.state_dir and wid in self._elsewhere:
+                log.info(
+                    "world %s gone %.0f s (link ttl %g s): link released, not checkpointed here (another owner "
+                    "answered it since: its state is that owner's)",
+                    wid,
+                    now - since,
+                    self.link_ttl,
+                )
+            elif self.state_dir and os.path.exists(self._checkpoint_path(self.state_dir, wid)):
                 log.info(
                     "world %s gone %.0f s (link ttl %g s): checkpointed to %s and released; it is restored "
                     "from there if it returns",

@@ -280,6 +280,17 @@ def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
     return replace(cfg, multicast_scouting=bool(args.multicast_scouting and not args.no_multicast_scouting))
 
 
+def check_key_expr(expr: str) -> str:
+    """`expr` if it is a valid zenoh key expression, else ValueError saying why (for command-line
+    arguments: a usage error, not a traceback from the subscriber)."""
+    try:
+        zenoh.KeyExpr(expr)
+    except Exception as e:  # noqa: BLE001 - zenoh raises its own ZError
+        why = str(e).split(" at /", 1)[0]  # zenoh appends its source location
+        raise ValueError(f"not a valid key expression: {expr!r} ({why})") from None
+    return expr
+
+
 def _encoding_str(sample: Any) -> str:
     try:
         return str(sample.encoding)

@@ -20,6 +20,19 @@ def view(worlds, owners, claims) -> View:
     return View(frozenset(worlds), frozenset(owners), {w: frozenset(c) for w, c in claims.items()})
 
 
+def test_broken_worlds_never_make_an_owner_hand_off_a_healthy_one():
+    # owner "a" answers "good" and holds 20 fake worlds it could not attach; "b" holds none
+    fakes = {f"fz-{i}" for i in range(20)}
+    v = view(fakes | {"good"}, {"a", "b"}, {w: {"a"} for w in fakes | {"good"}})
+    mine = fakes | {"good"}
+    assert plan("a", v, mine, {}, may_shed=True).shed == "good"  # counted as load: the healthy one moved
+    p = plan("a", v, mine, {}, failed=frozenset(fakes), may_shed=True)
+    assert p.shed is None and p.release == {}
+    # three working worlds against an idle owner: one is still handed off (the balance is kept)
+    v3 = view({"g1", "g2", "g3"}, {"a", "b"}, {w: {"a"} for w in ("g1", "g2", "g3")})
+    assert plan("a", v3, {"g1", "g2", "g3"}, {}, failed=frozenset(), may_shed=True).shed == "g3"
+
+
 def test_lower_owner_id_wins_a_double_claim_and_a_gone_world_is_released():
     v = view({"g1", "g2"}, {"a", "b"}, {"g1": {"a", "b"}, "g3": {"b"}})
     p = plan("b", v, {"g1", "g3"}, {})

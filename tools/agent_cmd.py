@@ -145,8 +145,14 @@ def _worker_argv(args: argparse.Namespace, k: int, endpoint: str) -> list[str]:
         argv += ["--state-dir", args.state_dir]
     for item in args.program_param or []:
         argv += ["--program-param", item]
+    # every bus option the agent was given, so that the worker opens its session the same way
+    # (e.g. a zenoh config file with user/password authentication); mode and endpoints are the worker's own
     if getattr(args, "secure", None):
         argv += ["--secure", args.secure]
+    if getattr(args, "config", None):
+        argv += ["--config", args.config]
+    if getattr(args, "multicast_scouting", False) and not getattr(args, "no_multicast_scouting", False):
+        argv += ["--multicast-scouting"]
     if args.seconds is not None:
         argv += ["--seconds", str(args.seconds)]
     return argv

@@ -19,7 +19,14 @@ import time
 from typing import Any, BinaryIO
 
 from sensorimotor.protocol import codec, heap, keys
-from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
+from sensorimotor.protocol.bus import (
+    Bus,
+    BusError,
+    BusMessage,
+    add_bus_arguments,
+    bus_config_from_args,
+    check_key_expr,
+)
 from sensorimotor.protocol.messages import Truth, WorldSpec
 from sensorimotor.tools.mcap_io import COMPRESSIONS, McapSink, Record, schema_of
 
@@ -304,6 +311,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main_args(args: argparse.Namespace) -> int:
+    try:
+        check_key_expr(args.keys)
+    except ValueError as e:
+        print(f"sme record: error: argument --keys: {e}", file=sys.stderr)
+        return 2
     try:
         out = open_output(args.file)  # before connecting: a bad path fails at once
     except OSError as e:

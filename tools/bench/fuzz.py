@@ -14,7 +14,10 @@ validators before it is sent): observations of the good world by the link's `rej
 its bad truths by `bad_truth`, its bad world events by `bad_world_event`, messages for worlds
 without a link by `unattached`, fake worlds by `attach_failed`. The result compares `sent` with
 `counted` (the counters' increase, read from the status queryable), counts `crashes` (the agent
-died, or a traceback in its log) and reports the good world's last Procrustes error.
+died, or a traceback in its log) and reports the good world's last Procrustes error, its step rate
+while the hostile messages were sent against the same agent and world without them (a window as
+long as the fuzz before it and one after the counters settled; `step_rate_ratio`), and every claim
+change of the good world during the fuzz (`handoffs`: broken worlds must never move a healthy one).
 """
 
 from __future__ import annotations
@@ -501,14 +504,14 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
             handles.append(bus.watch_alive(keys.alive_claim(GOOD, "*"), lambda k, a: good_claims.append((k, a)), False))
             f0 = good_steps()
             t0 = time.perf_counter()
-            for i, (cat, where, payload) in enumerate(todo):
+            for i, (cat, where, body) in enumerate(todo):
                 if cat != "attach":
-                    assert payload is not None
-                    put(where, payload)
+                    assert body is not None
+                    put(where, body)
                 else:
-                    if payload is not None:
+                    if body is not None:
 
-                        def answer(k: str, p: bytes | None, data: bytes = payload) -> bytes:
+                        def answer(k: str, p: bytes | None, data: bytes = body) -> bytes:
                             if not data:
                                 raise LookupError("this fake world has no spec")  # an error reply
                             return data
