@@ -126,14 +126,15 @@ def test_shared_checkpoints_are_kept_or_counted_never_raise(data, flip, wrap) ->
         good[i % len(good)] ^= 0x5A
     payload = codec.encode(SharedCheckpoint("g1", bytes(good), owner="b")) if wrap else data
     d._on_checkpoint(BusMessage(keys.agent_checkpoint("b", "g1"), payload, ""))
-    kept = "g1" in d._shared
+    copy = d.store.newest("g1")
+    kept = copy is not None
     assert kept != bool(d.counters["bad_checkpoint"])
-    if kept:
-        assert d._shared["g1"].world_id == "g1"
+    if copy is not None:
+        assert copy.checkpoint.world_id == "g1"
 
 
 def test_a_shared_checkpoint_for_another_world_is_refused() -> None:
     d = AgentDaemon(_NoBus(), "a0")  # type: ignore[arg-type]
     payload = codec.encode(SharedCheckpoint("g2", encode_checkpoint(_good(world_id="g2")), owner="b"))
     d._on_checkpoint(BusMessage(keys.agent_checkpoint("b", "g1"), payload, ""))
-    assert "g1" not in d._shared and d.counters["bad_checkpoint"] == 1
+    assert d.store.newest("g1") is None and d.counters["bad_checkpoint"] == 1
