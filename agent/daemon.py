@@ -169,6 +169,7 @@ class AgentDaemon:
         self._bad_ids: set[str] = set()  # world tokens whose id is not a valid id
         self._failed: set[str] = set()  # claimed worlds whose attach failed (until they vanish)
         self._retry_spec: dict[str, float] = {}  # failed for no spec reply (transient?): tried again from then
+        self._retried: set[str] = set()  # worlds tried again after no spec reply (their failure was counted)
         self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
         self.workers = tuple(workers)
         self.all_obs = all_obs
@@ -757,6 +758,7 @@ class AgentDaemon:
         held = self._claims.pop(wid, None)
         self._failed.discard(wid)
         self._retry_spec.pop(wid, None)
+        self._retried.discard(wid)
         for sub in self._obs_subs.pop(wid, ()):
             self.bus.undeclare(sub)
         if held is not None:
@@ -903,6 +905,7 @@ class AgentDaemon:
             if w in self._failed and now >= self._retry_spec.get(w, float("inf")):
                 self._failed.discard(w)  # no spec reply last time (a route being rebuilt?): once more
                 self._retry_spec.pop(w, None)
+                self._retried.add(w)  # a second failure is not counted or reported again
             if w in self._failed or any(o < self.owner_id for o in self.book.view().claimants(w)):
                 continue  # tried once this appearance / withdrawn at the next tick
             if now - self._waiting.get(w, float("-inf")) < self.LEASE_RETRY:
@@ -1008,6 +1011,9 @@ class AgentDaemon:
         )
 
     def _attach_failed(self, wid: str, reason: str, e: Exception) -> None:
+        if wid in self._retried:  # this appearance of the world was counted and reported already
+            log.debug("world %s: still cannot attach: %s", wid, clip(str(e)))
+            return
         self.counters["attach_failed"] += 1
         log.warning("world %s: cannot attach: %s", wid, clip(str(e)))
         self.event(wid, EventKind.ATTACH_FAILED, str(e), reason)
