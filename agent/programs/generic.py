@@ -765,6 +765,17 @@ class GenericProgram(Program):
                 )
             )
 
+    def _sarsa_update(self, obs: Observation, px: np.ndarray, pa: int, x: np.ndarray, a: int | None) -> None:
+        """The Sarsa(lambda) update for the step that led to `obs` (scaled `x`): a cost of 1, 0 at
+        the goal, a failure worth as little as never arriving; a time limit bootstraps from the next
+        action `a` (the greedy one when None: the state goes on)."""
+        assert self.sarsa is not None
+        if self._terminal(obs):
+            r = 0.0 if reached(self.goal, obs) else -1.0 / (1.0 - self.sarsa.gamma)
+            self.sarsa.learn_one(px, pa, r, x, None)
+        else:
+            self.sarsa.learn_one(px, pa, -1.0, x, a if a is not None else self.sarsa.greedy(x))
+
     def _learn_sarsa(self, obs: Observation) -> Decision:
         """One on-policy step of Sarsa(lambda): cost 1 per step, 0 at the goal, a failure as never arriving."""
         assert self.sarsa is not None
@@ -779,12 +790,7 @@ class GenericProgram(Program):
             pa = self._prev[1] if self._prev is not None else 0
             if self._prev_key is not None:
                 self._note_transition(self._prev_key, pa, obs)
-            if terminal:
-                r = 0.0 if reached(self.goal, obs) else -1.0 / (1.0 - self.sarsa.gamma)
-                self.sarsa.learn_one(self._prev_x, pa, r, x, None)
-            else:
-                boot = a2 if a2 is not None else self.sarsa.greedy(x)  # a time limit: the state goes on
-                self.sarsa.learn_one(self._prev_x, pa, -1.0, x, boot)
+            self._sarsa_update(obs, self._prev_x, pa, x, a2)
             self.new_samples += 1
         self._prev_x, self._prev_key, self._prev = None, None, None
         if self.new_samples >= self.params.embed_every:
@@ -862,12 +868,7 @@ class GenericProgram(Program):
         assert self.sarsa is not None
         x = self._vector(obs)
         if obs.t > 0 and self._prev_x is not None and self._prev is not None:
-            pa = self._prev[1]
-            if self._terminal(obs):
-                r = 0.0 if reached(self.goal, obs) else -1.0 / (1.0 - self.sarsa.gamma)
-                self.sarsa.learn_one(self._prev_x, pa, r, x, None)
-            else:
-                self.sarsa.learn_one(self._prev_x, pa, -1.0, x, a if a is not None else self.sarsa.greedy(x))
+            self._sarsa_update(obs, self._prev_x, self._prev[1], x, a)
         if obs.t == 0:
             self.sarsa.begin_episode()
         self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
