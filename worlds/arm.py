@@ -63,14 +63,18 @@ class ArmWorldParams:
     n_joints: int = option(2, "moving joints when `joints` is empty", min=1, max=4)
     hand: str = option("", "the hand link the marker rides on (empty: the end of the chain)")
     lattice: int = option(7, "start angles per moving joint (the start states: lattice^joints poses)", min=2, max=15)
-    bend: float = option(0.4, "the moving joints' angle at the lattice's centre, rad (nearest limit if outside)", min=-3.2, max=3.2)
+    bend: float = option(
+        0.4, "the moving joints' angle at the lattice's centre, rad (nearest limit if outside)", min=-3.2, max=3.2
+    )
     step: float = option(0.2, "joint increment of one action, rad (also the lattice spacing)", min=0.01, max=1.0)
     image: int = option(48, "camera image side, px (grey)", min=16, max=128)
     goal_image: int = option(96, "image side, px, the perceptual goal is found on", min=32, max=256)
     fov: float = option(50.0, "camera field of view, degrees", min=10.0, max=120.0)
     marker: float = option(0.04, "marker radius, m", min=0.005, max=0.5)
     proprioception: bool = option(False, "also serve the moving joints' angles as sensor `joints`")
-    actions: str = option("discrete", "discrete (+-step per joint) or box (an increment per joint)", choices=("discrete", "box"))
+    actions: str = option(
+        "discrete", "discrete (+-step per joint) or box (an increment per joint)", choices=("discrete", "box")
+    )
     max_episode_steps: int = option(0, "actions after which an episode ends (0: 4 x the lattice's diameter)", min=0)
 
 
@@ -85,9 +89,10 @@ class MorphParams:
 
 @dataclass(frozen=True)
 class JointParams:
-    """Lock a moving joint where it is (a second lesion of it frees it); every start shares its angle."""
+    """Lock a moving joint (a second lesion of it frees it); every start then shares its angle."""
 
     joint: str = option("", "the moving joint (empty: the first)")
+    at: float | None = option(None, "lock it at this angle, rad, within the lattice's range (none: where it is)")
 
 
 @dataclass(frozen=True)
@@ -237,7 +242,9 @@ class ArmWorld(World):
         "heal": HealParams,
     }
 
-    def __init__(self, world_id: str = "arm", seed: int = 0, params: ArmWorldParams | None = None, **overrides: Any) -> None:
+    def __init__(
+        self, world_id: str = "arm", seed: int = 0, params: ArmWorldParams | None = None, **overrides: Any
+    ) -> None:
         super().__init__(world_id, seed)
         self.params = prm = parse(ArmWorldParams, overrides, name=self.kind, base=params)
         self.urdf = resolve_urdf(prm.urdf)
@@ -287,7 +294,9 @@ class ArmWorld(World):
             names = self.movable_names
             bad = [j for j in prm.joints if j not in names]
             if bad:
-                raise ParamError(f"arm: no movable joint {bad[0]!r} in {os.path.basename(self.urdf)}; valid: {', '.join(names)}")
+                raise ParamError(
+                    f"arm: no movable joint {bad[0]!r} in {os.path.basename(self.urdf)}; valid: {', '.join(names)}"
+                )
             self.moving = [self.joint_names.index(j) for j in prm.joints]
         else:
             self.moving = self._most_moving(revolute, prm.n_joints)
@@ -606,7 +615,13 @@ class ArmWorld(World):
                 del self.locked[k]
                 self._changed()
                 return f"lesion: joint {name} moves again"
+            if prm.at is not None and not self._lo[k] <= prm.at <= self._hi[k]:
+                raise PerturbationError(
+                    f"arm: lesion at {prm.at} rad is outside joint {name}'s range {self._lo[k]:.3f}..{self._hi[k]:.3f}"
+                )
+            self.angles[k] = self.angles[k] if prm.at is None else prm.at
             self.locked[k] = float(self.angles[k])
+            self._set_body(self.angles)
             self._changed()
             return f"lesion: joint {name} locked at {self.angles[k]:.3f} rad"
         if isinstance(prm, ReverseParams):

@@ -1,0 +1,183 @@
+"""The arm world: any URDF (pybullet_data's Kuka iiwa, Franka Panda, xArm6, and a 3-link planar arm
+this test writes), its camera, perceptual goal, truth and body changes, learned by the generic
+program with no arm code in the agent. Shortened: 5 x 5 lattices (`sme reproduce arm` runs 7 x 7)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sensorimotor.agent.detectors import make_detector
+from sensorimotor.agent.embedding import procrustes_error
+from sensorimotor.agent.programs.generic import GenericProgram
+from sensorimotor.protocol.messages import Control
+from sensorimotor.protocol.params import ParamError
+from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.worlds.arm import ArmWorld, morph_urdf, scalable_links
+from sensorimotor.worlds.base import PerturbationError
+from sensorimotor.worlds.registry import make_world
+
+PLANAR = """<?xml version="1.0"?>
+<robot name="planar3">
+  <material name="grey"><color rgba="0.5 0.5 0.5 1"/></material>
+  <link name="base"><visual><geometry><box size="0.1 0.1 0.1"/></geometry><material name="grey"/></visual></link>
+{links}
+</robot>
+"""
+SEGMENT = """  <link name="l{k}">
+    <visual><origin xyz="0 0 0.15"/><geometry><box size="0.04 0.04 0.3"/></geometry><material name="grey"/></visual>
+  </link>
+  <joint name="j{k}" type="revolute">
+    <parent link="{parent}"/><child link="l{k}"/>
+    <origin xyz="0 0 {z}"/><axis xyz="0 1 0"/>
+    <limit lower="-2.5" upper="2.5" effort="1" velocity="1"/>
+  </joint>
+"""
+
+
+def planar_urdf(directory) -> str:
+    """A 3-link planar arm (joints j0..j2 about y, links 0.3 m) that ships with nothing of ours."""
+    links = "".join(
+        SEGMENT.format(k=k, parent="base" if k == 0 else f"l{k - 1}", z=0.05 if k == 0 else 0.3) for k in range(3)
+    )
+    path = directory / "planar3.urdf"
+    path.write_text(PLANAR.format(links=links))
+    return str(path)
+
+
+def learn(world: ArmWorld, steps: int, seed: int = 0, **kw):
+    program = GenericProgram(world.spec(), seed=seed)
+    detector = make_detector("cusum", **program.detector_params)
+    return run_inprocess(world, program, steps, detector=detector, **kw)
+
+
+@pytest.fixture(scope="module")
+def kuka():
+    with ArmWorld(lattice=5) as w:
+        yield w
+
+
+def test_spec_moves_goal_and_truth(kuka):
+    spec = kuka.spec()
+    assert spec.program == "generic" and spec.n_starts == 25 and spec.action_space.n == 4
+    assert spec.params["joints"] == "lbr_iiwa_joint_2,lbr_iiwa_joint_4"  # the two that move the hand most
+    r = kuka.reset(start=0)
+    img = r.tensors["camera"]
+    assert img.shape == (48, 48) and img.dtype == np.float32 and 0.0 <= img.min() and img.max() <= 1.0
+    assert np.allclose(kuka.angles, kuka.poses[0])
+    kuka.step(np.array([1.0]))  # joint 2 minus, at the edge of the lattice: the arm stays
+    assert np.allclose(kuka.angles, kuka.poses[0])
+    r2 = kuka.step(np.array([0.0]))  # joint 2 plus
+    assert np.allclose(kuka.angles, kuka.poses[0] + [0.2, 0.0]) and not np.array_equal(img, r2.tensors["camera"])
+    with pytest.raises(ValueError):
+        kuka.step(np.array([4.0]))
+    # the perceptual goal: the marker is seen nearest the image centre at the lattice's centre pose
+    assert np.allclose(kuka.goal, kuka.poses[12])
+    m = kuka.marker_position(kuka.goal)
+    assert m is not None and np.hypot(*(m - 47.5)) < 3.0
+    truth = kuka.truth().tensors
+    assert truth["positions"].shape == (25, 2) and truth["hand"].shape == (25, 3)
+    assert np.ptp(truth["hand"], axis=0).max() > 0.2  # the hand really moves over the lattice
+
+
+def test_kuka_is_learned_by_the_generic_program(kuka):
+    run = learn(kuka, 3000, stop_when=lambda r: len(r.embeddings) >= 3)
+    errors = [e.procrustes_error for e in run.embeddings]
+    assert errors and errors[-1] < 0.1, errors
+    assert run.embeddings[-1].metrics["goal_reached_fraction"] == 1.0
+    assert "lspi" in run.events("attached")[0].detail
+
+
+def test_a_planar_arm_written_here_is_learned_too(tmp_path):
+    with make_world("arm", seed=1, params={"urdf": planar_urdf(tmp_path), "lattice": "5", "bend": "0.3"}) as w:
+        assert w.spec().params["joints"] == "j0,j1"  # the two nearest the base move the hand most
+        run = learn(w, 4000, seed=1, stop_when=lambda r: len(r.embeddings) >= 3)
+        errors = [e.procrustes_error for e in run.embeddings]
+        assert errors and errors[-1] < 0.15, errors
+
+
+def test_bad_urdf_joint_and_link_are_refused_naming_the_valid_ones(tmp_path, kuka):
+    with pytest.raises(ParamError, match="neither a file nor in pybullet_data"):
+        ArmWorld(urdf=str(tmp_path / "none.urdf"))
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot><link name='a'/>")
+    with pytest.raises(ParamError, match="not a URDF"):
+        ArmWorld(urdf=str(bad))
+    with pytest.raises(ParamError, match=r"no movable joint 'elbow'.*valid: lbr_iiwa_joint_1"):
+        ArmWorld(joints=("elbow",))
+    with pytest.raises(PerturbationError, match=r"cannot scale link 'nope'.*valid: .*lbr_iiwa_link_4"):
+        kuka.perturb(Control("arm", "morph", {"link": "nope"}))
+    with pytest.raises(PerturbationError, match=r"no moving joint 'lbr_iiwa_joint_7'; valid: lbr_iiwa_joint_2"):
+        kuka.perturb(Control("arm", "reverse", {"joint": "lbr_iiwa_joint_7"}))
+    with pytest.raises(PerturbationError, match="scale"):
+        kuka.perturb(Control("arm", "morph", {"scale": "9"}))
+
+
+def test_morph_rewrites_the_urdf_and_keeps_the_pose(kuka):
+    text = open(kuka.urdf).read()
+    out = morph_urdf(text, "/base", {"lbr_iiwa_link_4": 1.5})
+    assert 'xyz="0 0.27675 0"' in out  # joint 5's offset 0.1845 x 1.5
+    assert "/base/meshes/link_0.obj" in out
+    assert "lbr_iiwa_link_4" in scalable_links(kuka._root)
+    kuka.reset(start=7)
+    before, hand0 = kuka.angles.copy(), kuka.truth().tensors["hand"]
+    msg = kuka.perturb(Control("arm", "morph", {"link": "lbr_iiwa_link_4", "scale": "1.3"}))
+    try:
+        assert "x 1.3" in msg and np.allclose(kuka.angles, before)
+        hand1 = kuka.truth().tensors["hand"]
+        assert np.linalg.norm(hand1 - hand0, axis=1).max() > 0.05  # the hand is elsewhere now
+        assert np.allclose(kuka.truth().tensors["positions"], kuka.poses)  # the joints' lattice is not
+    finally:
+        kuka.perturb(Control("arm", "heal", {}))
+    assert np.allclose(kuka.truth().tensors["hand"], hand0)
+
+
+def test_lesion_reverse_and_gain_change_what_an_action_does(kuka):
+    kuka.reset(start=12)
+    try:
+        kuka.perturb(Control("arm", "reverse", {"joint": "lbr_iiwa_joint_4"}))
+        kuka.step(np.array([2.0]))  # joint 4 plus, reversed
+        assert np.allclose(kuka.angles, kuka.poses[12] - [0.0, 0.2])
+        kuka.perturb(Control("arm", "gain", {"joint": "lbr_iiwa_joint_2", "gain": "2"}))
+        kuka.step(np.array([1.0]))
+        assert np.allclose(kuka.angles, kuka.poses[12] - [0.4, 0.2])
+        kuka.perturb(Control("arm", "lesion", {"joint": "lbr_iiwa_joint_2", "at": "0.2"}))
+        kuka.step(np.array([0.0]))
+        assert kuka.angles[0] == pytest.approx(0.2)
+        truth = kuka.truth().tensors["positions"]
+        assert np.allclose(truth[:, 0], 0.2)  # every start shares the locked angle
+        assert kuka.goal[0] == pytest.approx(0.2)  # the goal is found again among what can be reached
+    finally:
+        kuka.perturb(Control("arm", "heal", {}))
+    assert np.allclose(kuka.goal, kuka.poses[12]) and not kuka.locked
+
+
+@pytest.mark.parametrize(
+    "kind,params",
+    [
+        ("reverse", {"joint": "lbr_iiwa_joint_4"}),
+        ("lesion", {"joint": "lbr_iiwa_joint_2", "at": "0.0"}),
+        ("morph", {"link": "lbr_iiwa_link_4", "scale": "1.3"}),
+    ],
+)
+def test_a_body_change_is_detected_and_relearned(kind, params):
+    """Learned by step 2000; the change then; the agent's own detector notices the drop and the
+    relearned embedding fits the changed body's truth."""
+    at = 2000
+    with ArmWorld(lattice=5) as w:
+        ctl = Control("arm", kind, params)
+        run = learn(
+            w,
+            8000,
+            perturb=lambda k: ctl if k == at else None,
+            stop_when=lambda r: bool(r.events("relearned")),
+        )
+        before = [e for e in run.embeddings if e.step < at]
+        assert before and before[-1].procrustes_error < 0.05
+        drops = [e.step for e in run.events("drop_detected")]
+        assert len(drops) == 1 and at < drops[0] <= at + 1500, drops
+        relearned = [e for e in run.embeddings if e.trigger == "relearned"]
+        assert relearned and relearned[0].drop_step == drops[0]
+        truth = w.truth().tensors["positions"]
+        assert procrustes_error(truth, np.asarray(relearned[0].coordinates)) < 0.15
+        assert relearned[0].procrustes_error < 0.15
