@@ -181,3 +181,40 @@ def test_a_body_change_is_detected_and_relearned(kind, params):
         truth = w.truth().tensors["positions"]
         assert procrustes_error(truth, np.asarray(relearned[0].coordinates)) < 0.15
         assert relearned[0].procrustes_error < 0.15
+
+
+@pytest.mark.integration
+def test_the_arm_live_over_the_bus_is_learned_and_relearned_after_a_morph(procs, endpoint, monkeypatch):
+    """As a user would: `sme agent`, `sme world arm`, `sme watch`; `sme perturb morph` once learned;
+    the agent notices by itself and publishes a relearned embedding that fits the longer arm."""
+    import json
+    import threading
+
+    from tests.conftest import agent_status, wait_for, world_link
+
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
+    procs.start("agent", "--listen", endpoint, "-q")
+    procs.start("world", "arm", "--param", "lattice=5", "--connect", endpoint, "-q")
+    watch = procs.start("watch", "--json", "--timeout", "170", "--connect", endpoint)
+    rows: list[dict] = []
+    threading.Thread(target=lambda: rows.extend(json.loads(line) for line in watch.stdout), daemon=True).start()
+
+    def learned() -> bool:
+        link = world_link(agent_status(endpoint), "arm")
+        return link is not None and link.embedding_version > 0 and link.last_procrustes_error < 0.1
+
+    assert wait_for(learned, 90, every=0.5)
+    bad = procs.start("perturb", "morph", "--world", "arm", "--param", "link=elbow", "--connect", endpoint)
+    assert bad.wait(20) == 1  # refused by the world, which names the links it can scale
+    assert "lbr_iiwa_link_4" in bad.stderr.read()
+    pert = procs.start(
+        "perturb", "morph", "--world", "arm", "--param", "link=lbr_iiwa_link_4", "--param", "scale=1.3", "--connect", endpoint
+    )
+    assert pert.wait(20) == 0
+    assert wait_for(lambda: any(r.get("trigger") == "relearned" for r in rows), 120), [
+        (r.get("kind"), r.get("trigger")) for r in rows
+    ]
+    drops = [r for r in rows if r.get("kind") == "drop_detected"]
+    relearned = next(r for r in rows if r.get("trigger") == "relearned")
+    assert len(drops) == 1 and relearned["drop_step"] == drops[0]["step"]
+    assert relearned["procrustes_error"] < 0.15
