@@ -208,7 +208,16 @@ def test_the_arm_live_over_the_bus_is_learned_and_relearned_after_a_morph(procs,
     assert bad.wait(20) == 1  # refused by the world, which names the links it can scale
     assert "lbr_iiwa_link_4" in bad.stderr.read()
     pert = procs.start(
-        "perturb", "morph", "--world", "arm", "--param", "link=lbr_iiwa_link_4", "--param", "scale=1.3", "--connect", endpoint
+        "perturb",
+        "morph",
+        "--world",
+        "arm",
+        "--param",
+        "link=lbr_iiwa_link_4",
+        "--param",
+        "scale=1.3",
+        "--connect",
+        endpoint,
     )
     assert pert.wait(20) == 0
     assert wait_for(lambda: any(r.get("trigger") == "relearned" for r in rows), 120), [
