@@ -7,48 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sensorimotor.agent.detectors import make_detector
 from sensorimotor.agent.embedding import procrustes_error
-from sensorimotor.agent.programs.generic import GenericProgram
 from sensorimotor.protocol.messages import Control
 from sensorimotor.protocol.params import ParamError
-from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.tools.experiments.arm import learn, planar_urdf
 from sensorimotor.worlds.arm import ArmWorld, morph_urdf, scalable_links
 from sensorimotor.worlds.base import PerturbationError
 from sensorimotor.worlds.registry import make_world
-
-PLANAR = """<?xml version="1.0"?>
-<robot name="planar3">
-  <material name="grey"><color rgba="0.5 0.5 0.5 1"/></material>
-  <link name="base"><visual><geometry><box size="0.1 0.1 0.1"/></geometry><material name="grey"/></visual></link>
-{links}
-</robot>
-"""
-SEGMENT = """  <link name="l{k}">
-    <visual><origin xyz="0 0 0.15"/><geometry><box size="0.04 0.04 0.3"/></geometry><material name="grey"/></visual>
-  </link>
-  <joint name="j{k}" type="revolute">
-    <parent link="{parent}"/><child link="l{k}"/>
-    <origin xyz="0 0 {z}"/><axis xyz="0 1 0"/>
-    <limit lower="-2.5" upper="2.5" effort="1" velocity="1"/>
-  </joint>
-"""
-
-
-def planar_urdf(directory) -> str:
-    """A 3-link planar arm (joints j0..j2 about y, links 0.3 m) that ships with nothing of ours."""
-    links = "".join(
-        SEGMENT.format(k=k, parent="base" if k == 0 else f"l{k - 1}", z=0.05 if k == 0 else 0.3) for k in range(3)
-    )
-    path = directory / "planar3.urdf"
-    path.write_text(PLANAR.format(links=links))
-    return str(path)
-
-
-def learn(world: ArmWorld, steps: int, seed: int = 0, **kw):
-    program = GenericProgram(world.spec(), seed=seed)
-    detector = make_detector("cusum", **program.detector_params)
-    return run_inprocess(world, program, steps, detector=detector, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +46,7 @@ def test_spec_moves_goal_and_truth(kuka):
 
 
 def test_kuka_is_learned_by_the_generic_program(kuka):
-    run = learn(kuka, 3000, stop_when=lambda r: len(r.embeddings) >= 3)
+    run, _ = learn(kuka, 0, 3000, stop_when=lambda r: len(r.embeddings) >= 3)
     errors = [e.procrustes_error for e in run.embeddings]
     assert errors and errors[-1] < 0.1, errors
     assert run.embeddings[-1].metrics["goal_reached_fraction"] == 1.0
@@ -91,7 +56,7 @@ def test_kuka_is_learned_by_the_generic_program(kuka):
 def test_a_planar_arm_written_here_is_learned_too(tmp_path):
     with make_world("arm", seed=1, params={"urdf": planar_urdf(tmp_path), "lattice": "5", "bend": "0.3"}) as w:
         assert w.spec().params["joints"] == "j0,j1"  # the two nearest the base move the hand most
-        run = learn(w, 4000, seed=1, stop_when=lambda r: len(r.embeddings) >= 3)
+        run, _ = learn(w, 1, 4000, stop_when=lambda r: len(r.embeddings) >= 3)
         errors = [e.procrustes_error for e in run.embeddings]
         assert errors and errors[-1] < 0.15, errors
 
@@ -166,8 +131,9 @@ def test_a_body_change_is_detected_and_relearned(kind, params):
     at = 2000
     with ArmWorld(lattice=5) as w:
         ctl = Control("arm", kind, params)
-        run = learn(
+        run, _ = learn(
             w,
+            0,
             8000,
             perturb=lambda k: ctl if k == at else None,
             stop_when=lambda r: bool(r.events("relearned")),

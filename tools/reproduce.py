@@ -9,7 +9,9 @@ and a baseline change while driving), `objectpose` (ch. 6: the generic program's
 object pose against PCA and Isomap, Fig 6.3, and the alignment task of Fig 6.4), `rovingeye` (ch. 5.2:
 Table 5.1, the five ways of making traces, Fig 5.8 scree and Fig 5.11 embeddings) and `chapter9`
 (beyond the dissertation: probabilistic embedding in a slippery gridworld, option discovery,
-mountain-car policy maps, Isomap and state-aided vergence traces). Runs go to worker processes
+mountain-car policy maps, Isomap and state-aided vergence traces); and `arm` (beyond the
+dissertation: robot arms from URDFs against PCA and Isomap, and the body changes the agent notices
+by itself). Runs go to worker processes
 (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
@@ -629,7 +631,14 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
     return run(runs, quick, workers, out)
 
 
+def arm(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.arm import chapter
+
+    return chapter(runs, quick, workers, out)
+
+
 CHAPTERS = {
+    "arm": arm,
     "gridworld": gridworld,
     "retina": retina,
     "vergence": vergence,
@@ -663,7 +672,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
         help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, objectpose, rovingeye, "
-        "chapter9), or all of them into one report",
+        "chapter9), or all of them into one report; `arm`: robot arms from URDFs and their body changes",
         description=__doc__
         + "\n`all` runs every chapter (retina, retina-natural, gridworld, rovingeye, objectpose, vergence, mountaincar, "
         "chapter9) and writes OUT/report.md and OUT/report.html: each claim of the dissertation beside ours with a "
