@@ -193,3 +193,26 @@ def test_the_arm_live_over_the_bus_is_learned_and_relearned_after_a_morph(procs,
     relearned = next(r for r in rows if r.get("trigger") == "relearned")
     assert len(drops) == 1 and relearned["drop_step"] == drops[0]["step"]
     assert relearned["procrustes_error"] < 0.15
+
+
+@pytest.mark.integration
+def test_bench_world_arm_reports_in_process_bus_and_raw_pybullet_rows():
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", "sensorimotor.tools.cli", "bench", "world", "--world", "arm", "--steps", "200", "--json"]
+        + ["--param", "lattice=3"],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert out.returncode == 0, out.stderr
+    rows = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+    names = [r["world"] + " " + r.get("where", "") for r in rows]
+    assert any("stepSimulation (model.urdf)" in n for n in names) and any("48x48 frame of it" in n for n in names)
+    inproc = next(r for r in rows if r.get("where") == "in-process")
+    bus = next(r for r in rows if r.get("where", "").startswith("over the bus"))
+    assert inproc["steps"] == bus["steps"] == 200 and min(r["steps_per_s"] for r in rows) > 0
+    assert bus["ratio_to_in_process"] == pytest.approx(bus["steps_per_s"] / inproc["steps_per_s"], rel=0.01)

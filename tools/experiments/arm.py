@@ -25,7 +25,7 @@ import numpy as np
 from sensorimotor.agent.detectors import make_detector
 from sensorimotor.agent.embedding import procrustes_error
 from sensorimotor.agent.programs.generic import GenericProgram
-from sensorimotor.protocol.messages import Control
+from sensorimotor.protocol.messages import Control, Embedding
 from sensorimotor.tools.experiments import scoring
 from sensorimotor.tools.experiments.objectpose import peers
 from sensorimotor.tools.inprocess import InProcessRun, run_inprocess
@@ -92,6 +92,10 @@ def learn(
     return run, time.perf_counter() - t0
 
 
+def _error(e: Embedding) -> float:
+    return float("nan") if e.procrustes_error is None else float(e.procrustes_error)
+
+
 def _world(body: str, seed: int, lattice: int, out: str) -> ArmWorld:
     prm = dict(BODIES[body])
     if prm["urdf"] == "planar":
@@ -105,7 +109,8 @@ def body_job(body: str, seed: int, lattice: int, embeddings: int, steps: int, ou
     """One body, one seed: the learned embedding against both truths, beside the peers."""
     from threadpoolctl import threadpool_limits
 
-    with _world(body, seed, lattice, out) as w, threadpool_limits(1):
+    w = _world(body, seed, lattice, out)
+    with w, threadpool_limits(1):
         if body == "franka_panda":
             embeddings, steps = 3 * embeddings, 3 * steps
         run, sec = learn(w, seed, steps, stop_when=lambda r: len(r.embeddings) >= embeddings)
@@ -121,9 +126,9 @@ def body_job(body: str, seed: int, lattice: int, embeddings: int, steps: int, ou
             "seed": seed,
             "joints": w.spec().params["joints"],
             "n_starts": len(w.poses),
-            "errors": [float(e.procrustes_error) for e in run.embeddings],
-            "steps_to_first_below_0.1": next((int(e.step) for e in run.embeddings if e.procrustes_error < 0.1), None),
-            "final_error": float(last.procrustes_error),
+            "errors": [_error(e) for e in run.embeddings],
+            "steps_to_first_below_0.1": next((int(e.step) for e in run.embeddings if _error(e) < 0.1), None),
+            "final_error": _error(last),
             "hand_error": procrustes_error(truth["hand"], xy),
             "goal_reached": float(last.metrics["goal_reached_fraction"]),
             "scores": scoring.scores_of(last),
@@ -141,7 +146,8 @@ def change_job(change: str, seed: int, lattice: int, at: int, steps: int, out: s
     `change` "none" is the false-alarm run: `steps` steps and no change."""
     from threadpoolctl import threadpool_limits
 
-    with _world("kuka_iiwa", seed, lattice, out) as w, threadpool_limits(1):
+    w = _world("kuka_iiwa", seed, lattice, out)
+    with w, threadpool_limits(1):
         ctl = None
         if change != "none":
             kind, params = CHANGES[change]
@@ -166,7 +172,7 @@ def change_job(change: str, seed: int, lattice: int, at: int, steps: int, out: s
             res["false_alarms"] = len(drops)
             return res
         res.update(
-            before_error=float(before[-1].procrustes_error) if before else None,
+            before_error=_error(before[-1]) if before else None,
             before_coordinates=np.asarray(before[-1].coordinates).tolist() if before else None,
             hand_before=hand0.tolist(),
             detected_after=drops[0] - at if drops else None,
