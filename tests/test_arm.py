@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from sensorimotor.agent.embedding import procrustes_error
+from sensorimotor.agent.programs.generic import GenericProgram
 from sensorimotor.protocol.messages import Control
 from sensorimotor.protocol.params import ParamError
 from sensorimotor.tools.experiments.arm import learn, planar_urdf
@@ -216,3 +217,16 @@ def test_bench_world_arm_reports_in_process_bus_and_raw_pybullet_rows():
     bus = next(r for r in rows if r.get("where", "").startswith("over the bus"))
     assert inproc["steps"] == bus["steps"] == 200 and min(r["steps_per_s"] for r in rows) > 0
     assert bus["ratio_to_in_process"] == pytest.approx(bus["steps_per_s"] / inproc["steps_per_s"], rel=0.01)
+
+
+def test_proprioception_and_box_actions():
+    with ArmWorld(lattice=3, proprioception=True, actions="box", image=24, goal_image=48) as w:
+        spec = w.spec()
+        assert [s.name for s in spec.sensors] == ["camera", "joints"] and spec.action_space.dims == 2
+        r = w.reset(start=0)
+        assert np.allclose(r.tensors["joints"], w.poses[0])
+        r = w.step(np.array([0.5, 1.0]))  # half a step of joint 2, a whole one of joint 4
+        assert np.allclose(r.tensors["joints"], w.poses[0] + [0.1, 0.2], atol=1e-6)
+        with pytest.raises(ValueError):
+            w.step(np.array([np.nan, 0.0]))
+        assert "lspi" in GenericProgram(spec, seed=0).describe()
