@@ -22,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"
 BLOCK = re.compile(r"(<!-- BEGIN results: ([\w.-]+) -->\n)(.*?)(<!-- END results: \2 -->)", re.S)
-PAGES = ("README.md", "docs/getting-started.md", "docs/results.md")
+PAGES = ("README.md", "docs/getting-started.md", "docs/results.md", "docs/arm.md")
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,11 @@ def demo_output(src: Source, text: str) -> str:
     return "```text\n$ " + src.command + "\n" + "\n".join(shown + [""] + lines[cut:]) + "\n```"
 
 
+def command_output(src: Source, text: str) -> str:
+    """A command's stdout, whole, under the command."""
+    return "```text\n$ " + src.command + "\n" + text.rstrip("\n") + "\n```"
+
+
 SOURCES: dict[str, Source] = {
     "demo": Source("sme demo --steps 12000 --seconds 120", "demo/output.txt", demo_output),
     "gridworld-quick": Source(
@@ -59,6 +64,8 @@ SOURCES: dict[str, Source] = {
     "chapter9-quick": Source("sme reproduce chapter9 --quick", "chapter9-quick/results.json", reproduce_table),
     "objectpose": Source("sme reproduce objectpose --runs 5", "objectpose/results.json", reproduce_table),
     "rovingeye": Source("sme reproduce rovingeye --runs 5", "rovingeye/results.json", reproduce_table),
+    "arm": Source("sme reproduce arm --runs 5", "arm/results.json", reproduce_table),
+    "bench-world-arm": Source("sme bench world --world arm", "bench-world-arm/output.txt", command_output),
 }
 
 
