@@ -424,6 +424,7 @@ class GenericProgram(Program):
         self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
         self._sweep_rbf: _RBFFeatures | None = None  # that basis while the accepted policy is swept
         self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
+        self._accepted_reached: list[bool] | None = None  # and which of its traces reached the goal
         self._diverged = False  # the trace in progress left the accepted policy's choices
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
@@ -659,19 +660,22 @@ class GenericProgram(Program):
         self.phase = "explore"
         if self._watching and not self._checking and self._accepted is not None and not (better or same):
             if equal:
-                # as good as the accepted policy but other traces (ties broken another way): its
-                # scores are fair for the detector; the accepted map stays the published one
-                self._perf.extend(self._unfed)
+                # as good as the accepted policy but other traces (ties broken another way): the
+                # accepted map stays the published one; its scores are fair for the detector only
+                # where they are absolute (a stochastic world), not relative to the accepted traces
+                if self.stochastic:
+                    self._perf.extend(self._unfed)
                 return None
             # the newest policy is worse than the accepted one: not published, not judged by the
             # detector; the accepted policy is swept again, so that a changed world still shows
             return self._start_sweep(check=True)
-        if self._watching or good:  # the scores not yet fed as their traces ended (see `_sweep_act`)
-            self._perf.extend(self._unfed)
+        if (self._watching or good) and (self.stochastic or self._accepted_reached is None):
+            self._perf.extend(self._unfed)  # the scores not yet fed as their traces ended (see `_sweep_act`)
         relearned = good and self.relearn_at is not None
         if not self._checking and (better or not self._watching):
             self._accepted, self._best = np.array(self._sweep_w, copy=True), score
             self._accepted_traces = [list(t) for t in sw.traces]
+            self._accepted_reached = [bool(r) for r in sw.reached]
             self._accepted_basis = None if self.learner != "lspi" else _basis_state(self._rbf)
         self._watching = self._watching or good
         self._embed(step, relearned, k)
@@ -882,7 +886,7 @@ class GenericProgram(Program):
             # else only if the newer policy is accepted when the sweep ends
             assert self._sweep.last is not None
             trace, ok = self._sweep.last
-            score = self.lspi.gamma ** len(trace) if ok else 0.0
+            score = self._trace_score(self._sweep.started[-1], trace, ok)
             if self._watching and (self._checking or not self._diverged):
                 self._perf.append(score)
             else:
@@ -897,6 +901,23 @@ class GenericProgram(Program):
             if again is not None:
                 return again
         return dec
+
+    def _trace_score(self, start: int, trace: list[int], ok: bool) -> float:
+        """The detector's value of a trace. In a deterministic world, relative to the accepted
+        policy's own trace from that start: 1 while it does what it did (as long or shorter, or
+        failing where it failed), gamma per extra step, 0 for a goal no longer reached - so an
+        unchanged world gives a constant stream, however long or varied the traces (a sweep of many
+        starts in random order would otherwise show runs of long traces that read as drops), and
+        any change the policy meets shows at once. Otherwise (stochastic, or nothing accepted yet)
+        gamma^length at the goal, else 0."""
+        gamma = self.lspi.gamma
+        ref = self._accepted_traces
+        if self.stochastic or ref is None or self._accepted_reached is None or start >= len(self._accepted_reached):
+            return gamma ** len(trace) if ok else 0.0
+        was = self._accepted_reached[start]
+        if not ok:
+            return 0.0 if was else 1.0
+        return 1.0 if not was else min(1.0, gamma ** (len(trace) - len(ref[start])))
 
     def performance(self, obs: Observation) -> float | None:
         return self._perf.pop(0) if self._perf else None
@@ -915,7 +936,7 @@ class GenericProgram(Program):
         self._perf.clear()
         self._watching = False
         self._accepted, self._best, self._checking = None, None, False
-        self._accepted_traces = None
+        self._accepted_traces, self._accepted_reached = None, None
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
         self.emit(
@@ -958,6 +979,7 @@ class GenericProgram(Program):
             "sweep_on_accepted_basis": self._sweep_rbf is not None,
             "diverged": self._diverged,
             "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
+            "accepted_reached": self._accepted_reached,
             "unfed": list(self._unfed),
         }
         if self.sarsa is not None:
@@ -1003,6 +1025,8 @@ class GenericProgram(Program):
         self._diverged = bool(state.get("diverged", False))
         at = state.get("accepted_traces")
         self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
+        ar = state.get("accepted_reached")
+        self._accepted_reached = None if ar is None else [bool(r) for r in ar]
         self._unfed = [float(v) for v in state.get("unfed", [])]
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
