@@ -35,8 +35,10 @@ step); *embed*: the greedy policy from each start state (`StartStateSweep`), tra
 classical MDS, Embedding vN. Once a sweep reaches the goal from `watch_after` of the starts the
 policy is *accepted*; after that a new policy is embedded only when its sweep is as good (as many
 goals, traces no longer), else the accepted policy is swept again - so embeddings hold once
-learned, and the drop detector sees only the accepted policy's trace scores (gamma^length at the
-goal, else 0), never the program's own experiments. On a drop the samples and policy are dropped,
+learned, and the drop detector sees only the accepted policy's trace scores, never the program's
+own experiments: in a deterministic world each relative to the accepted policy's own trace from
+that start (1 while it does what it did, gamma per extra step, 0 for a goal no longer reached), in
+a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are dropped,
 the policy relearned from fresh experience and the next embedding says `relearned`.
 """
 
