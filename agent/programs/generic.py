@@ -51,6 +51,7 @@ import scipy.sparse as sp
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mode_trace
+from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
@@ -119,6 +120,12 @@ class GenericProgramParams:
     samples: int = option(8, "traces per start state once the world is seen to be stochastic", min=2, max=100)
     estimator: str = option(
         "mode", "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4)", choices=("mode", "mean")
+    )
+    frames: str = option(
+        "auto",
+        "discrete actions: compare traces in the frame of the start when some actions are rotations "
+        "(auto: found from experience, see agent.embedding.rotation_frames), or as they are (off)",
+        choices=("auto", "off"),
     )
     watch_after: float = option(
         0.9,
@@ -286,11 +293,17 @@ def embed_job(
     estimator: str = "mode",
     distance: str = "padded",
     dtw_penalty: float = 1.0,
+    rotations: tuple[int, list[list[int]]] | None = None,
+    n_actions: int = 0,
 ) -> dict[str, Any]:
     """Trace distances and classical MDS of each start's sampled traces (one sample each in a
-    deterministic world): edit distance of discrete actions; the padded sum or DTW of the action
-    values when `actions` is the table of a discretised box. Several samples: the mode trace, or
-    the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
+    deterministic world): edit distance of discrete actions (in the start's frame when `rotations`,
+    (order, [[action, power], ...]), says which actions turn: `frame_trace`); the padded sum or DTW
+    of the action values when `actions` is the table of a discretised box. Several samples: the mode
+    trace, or the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
+    if rotations is not None and actions is None:
+        rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
+        traces = [[frame_trace(t, rot, n_actions) for t in s] for s in traces]
     if any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
         D = mean_pair_distances(traces, substitution_cost=2)
     else:
@@ -357,6 +370,7 @@ class GenericProgram(Program):
         self.stochastic = False
         self._transitions: dict[tuple[bytes, int], tuple[bytes, bytes | None]] = {}
         self._said_table_full = False
+        self._rotations: Rotations | None = None  # the rotations among the actions, once found
         lo = np.concatenate([np.full(int(np.prod(s.shape)), s.low, float) for s in spec.sensors])
         hi = np.concatenate([np.full(int(np.prod(s.shape)), s.high, float) for s in spec.sensors])
         span = np.where(hi > lo, hi - lo, 1.0)
@@ -678,10 +692,32 @@ class GenericProgram(Program):
         self._checking = False
         return None
 
+    def _find_rotations(self, step: int) -> Rotations | None:
+        """Tabular learner, discrete actions, `frames=auto`: the rotations among the actions, found
+        again at each embedding from the transitions seen so far (an event says when they change);
+        forgotten on a drop."""
+        if self.tabular and self.discrete and self.params.frames == "auto" and self._transitions:
+            nxt = {k: first for k, (first, other) in self._transitions.items() if other is None}
+            found = find_rotations(nxt, range(self.n_actions))
+            if found != self._rotations and found is not None:
+                turns = ", ".join(f"action {a} = {p} turn(s)" for a, p in found.powers)
+                self.emit(
+                    EventOutput(
+                        EventKind.POLICY_ITERATION,
+                        f"some actions are rotations ({turns}; {found.order} make a full turn): "
+                        "traces are compared in the frame of their start",
+                        step,
+                        reason="rotations",
+                    )
+                )
+            self._rotations = found
+        return self._rotations
+
     def _embed(self, step: int, relearned: bool, k: int) -> None:
         """Start the distances + MDS job on the sweep's traces; `relearned`: the first good policy
         after a drop (the trigger will say so, with the drop's step)."""
         traces = [list(t) for t in self._sweep.traces]
+        rot = self._find_rotations(step)
         n = len(traces) // k
         per_start = [traces[i * k : (i + 1) * k] for i in range(n)]
         assert self.background is not None
@@ -695,6 +731,8 @@ class GenericProgram(Program):
             estimator=prm.estimator,
             distance=prm.distance,
             dtw_penalty=prm.dtw_penalty,
+            rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
+            n_actions=self.n_actions,
         )
         frac, length = _sweep_score(self._sweep.reached, traces)
         self._pending_embedding = {
@@ -711,6 +749,7 @@ class GenericProgram(Program):
             "samples_per_start": float(k),
             "stochastic": float(self.stochastic),
             "accepted_policy": float(self._checking),
+            "rotation_order": float(rot.order if rot is not None else 0),
         }
         if relearned:
             self.relearn_at = None
@@ -730,6 +769,7 @@ class GenericProgram(Program):
             "samples_per_start",
             "stochastic",
             "accepted_policy",
+            "rotation_order",
         )
         self.emit(
             EmbeddingOutput(
@@ -918,6 +958,7 @@ class GenericProgram(Program):
         self._accepted_traces = None
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
+        self._rotations = None
         self.emit(
             EventOutput(EventKind.RELEARNING, "samples and policy dropped; relearning from fresh experience", step)
         )
@@ -959,6 +1000,9 @@ class GenericProgram(Program):
             "diverged": self._diverged,
             "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
             "unfed": list(self._unfed),
+            "rotations": None
+            if self._rotations is None
+            else [self._rotations.order, [list(p) for p in self._rotations.powers]],
         }
         if self.sarsa is not None:
             out["sarsa"] = self.sarsa.state()
@@ -1004,6 +1048,8 @@ class GenericProgram(Program):
         at = state.get("accepted_traces")
         self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
         self._unfed = [float(v) for v in state.get("unfed", [])]
+        rot = state.get("rotations")
+        self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
             self._warm = int(state["warm"])
