@@ -199,3 +199,18 @@ def test_bench_zoo_quick_reports_every_figure(capsys):
     r = run_one(next(z for z in ZOO if z.label == "CliffWalking"), 0, 8_000)
     assert r["goal"] == "terminated" and r["final_error"] < 0.1 and r["goal_reached_fraction"] == 1.0
     assert r["trustworthiness"] > 0.9 and r["pca_error"] is not None and r["regressions"] == 0 and r["drops"] == 0
+    assert r["worst_ratio"] is not None and r["worst_ratio"] <= 1.5
+
+
+@pytest.mark.skipif(importlib.util.find_spec("minigrid") is None, reason="minigrid is not installed")
+def test_minigrid_turns_are_found_and_its_map_no_longer_folds():
+    from sensorimotor.protocol.messages import EventKind
+
+    with make_world("gym:MiniGrid-Empty-8x8-v0", None, 0) as w:
+        program = make_program(w.spec(), 0)
+        run = run_inprocess(w, program, 12_000)
+    said = [e for e in run.events(EventKind.POLICY_ITERATION) if e.reason == "rotations"]
+    assert said and "4 make a full turn" in said[0].detail
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert embs[-1].metrics["rotation_order"] == 4.0 and embs[-1].metrics["goal_reached_fraction"] == 1.0
+    assert embs[-1].procrustes_error < 0.03, [e.procrustes_error for e in embs]  # 0.25 as the traces were
