@@ -214,3 +214,23 @@ def test_minigrid_turns_are_found_and_its_map_no_longer_folds():
     embs = [e for e in run.embeddings if e.procrustes_error is not None]
     assert embs[-1].metrics["rotation_order"] == 4.0 and embs[-1].metrics["goal_reached_fraction"] == 1.0
     assert embs[-1].procrustes_error < 0.03, [e.procrustes_error for e in embs]  # 0.25 as the traces were
+
+
+def test_a_world_whose_sampled_traces_never_differ_goes_back_to_one_trace_per_start():
+    from sensorimotor.agent.detectors import make_detector
+    from sensorimotor.protocol.messages import EventKind
+
+    with make_world("gym:CliffWalking-v1", None, 0) as w:
+        program = make_program(w.spec(), 0)
+        detector = make_detector("cusum", **program.detector_params)
+
+        def alike(step: int, obs: object) -> None:  # as when distinct states look alike (MountainCar's floats)
+            if step == 4_000:
+                program.stochastic = True
+
+        run = run_inprocess(w, program, 10_000, detector=detector, on_step=alike)
+    said = [e for e in run.events(EventKind.POLICY_ITERATION) if e.reason == "deterministic"]
+    assert said and not program.stochastic
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert all(e.metrics["samples_per_start"] == 1.0 for e in embs) and embs[-1].procrustes_error < 0.1
+    assert not run.events(EventKind.DROP_DETECTED)

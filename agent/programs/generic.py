@@ -443,6 +443,8 @@ class GenericProgram(Program):
         self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
         self._diverged = False  # the trace in progress left the accepted policy's choices
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
+        self._start_scores: list[float] = []  # scores of the start state in progress (one per sample)
+        self._start_fair = True  # all of them came from the accepted policy's choices
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
         self.use_background(prm.learn_lag)
@@ -654,6 +656,7 @@ class GenericProgram(Program):
         self._sweep = self._new_sweep()
         self._diverged = False
         self._unfed = []
+        self._start_scores, self._start_fair = [], True
         # a random order: the detector then sees trace scores in no spatial order (a run of far
         # starts, long traces, would look like a drop)
         return self._sweep.begin([int(i) for i in self.rng.permutation(self.spec.n_starts)])
@@ -662,6 +665,21 @@ class GenericProgram(Program):
         """A sweep finished: accept, publish, feed the detector, or sweep the accepted policy again."""
         sw = self._sweep
         k = sw.repeats
+        if self.stochastic and k > 1 and all(sw.traces[i] == sw.traces[i - i % k] for i in range(len(sw.traces))):
+            # every start's samples were the same trace: the policy controls whatever made the
+            # transitions differ (or distinct states looked alike), so one trace per start will do
+            # (ch. 9.4); the transitions are watched again from here
+            sw.traces, sw.reached = sw.traces[::k], sw.reached[::k]
+            sw.repeats, k, sw.rewarded = 1, 1, sum(sw.reached)
+            self.stochastic = False
+            self.emit(
+                EventOutput(
+                    EventKind.POLICY_ITERATION,
+                    "the sampled traces from every start state were the same: one trace per start state again",
+                    step,
+                    reason="deterministic",
+                )
+            )
         score = _sweep_score(sw.reached, sw.traces)
         frac, length = score
         good = frac >= self.params.watch_after
@@ -925,11 +943,17 @@ class GenericProgram(Program):
             # else only if the newer policy is accepted when the sweep ends
             assert self._sweep.last is not None
             trace, ok = self._sweep.last
-            score = self.lspi.gamma ** len(trace) if ok else 0.0
-            if self._watching and (self._checking or not self._diverged):
-                self._perf.append(score)
-            else:
-                self._unfed.append(score)
+            self._start_scores.append(self.lspi.gamma ** len(trace) if ok else 0.0)
+            self._start_fair = self._start_fair and (self._checking or not self._diverged)
+            if len(self._start_scores) >= self._sweep.repeats:
+                # one value per start state: its samples' mean (samples of one start run in a row,
+                # and a run of like scores would read as a drop)
+                score = float(np.mean(self._start_scores))
+                if self._watching and self._start_fair:
+                    self._perf.append(score)
+                else:
+                    self._unfed.append(score)
+                self._start_scores, self._start_fair = [], True
             self._diverged = False
         if self.sarsa is not None and not self._checking and self.params.epsilon == 0.0:
             self._learn_in_sweep(obs, None if dec.reset else int(dec.values[0]))
@@ -1003,6 +1027,8 @@ class GenericProgram(Program):
             "diverged": self._diverged,
             "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
             "unfed": list(self._unfed),
+            "start_scores": list(self._start_scores),
+            "start_fair": self._start_fair,
             "rotations": None
             if self._rotations is None
             else [self._rotations.order, [list(p) for p in self._rotations.powers]],
@@ -1051,6 +1077,8 @@ class GenericProgram(Program):
         at = state.get("accepted_traces")
         self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
         self._unfed = [float(v) for v in state.get("unfed", [])]
+        self._start_scores = [float(v) for v in state.get("start_scores", [])]
+        self._start_fair = bool(state.get("start_fair", True))
         rot = state.get("rotations")
         self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
         if self.sarsa is not None:
