@@ -71,3 +71,16 @@ def test_frames_remove_the_fold_of_egocentric_traces():
     assert rot is not None
     assert round(err(traces), 3) == 0.250  # the fold
     assert err([frame_trace(t, rot, 7) for t in traces]) < 0.025
+
+
+def test_mean_trace_distances_compare_trace_distributions_step_by_step():
+    from sensorimotor.agent.embedding.probabilistic import mean_trace_distances, mean_traces
+
+    samples = [[[0, 1], [0, 0]], [[1, 1], [1, 1]], [[0, 1, 1, 1], [0]]]
+    reached = [[True, True], [True, True], [True, False]]
+    M = mean_traces(samples, 2, reached, horizon=2)
+    assert M.shape == (3, 2, 2) and M[0, 1].tolist() == [0.5, 0.5] and M[2, 1].tolist() == [0.0, 1.0]
+    D = mean_trace_distances(samples, 2, reached, horizon=2)
+    assert D[0, 1] == 3.0 and D[0, 2] == 1.0 and np.allclose(D, D.T) and np.all(np.diag(D) == 0)
+    # every sample of a start failed: all of them count
+    assert mean_traces([[[0]], [[1]]], 2, [[False], [False]]).shape == (2, 1, 2)

@@ -50,7 +50,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
-from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mode_trace
+from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
 from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
@@ -120,9 +120,20 @@ class GenericProgramParams:
     samples: int = option(8, "traces per start state once the world is seen to be stochastic", min=2, max=100)
     estimator: str = option(
         "mode",
-        "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4), or plain (one trace per start, "
-        "as in a deterministic world: the figure the estimators are compared with)",
-        choices=("mode", "mean", "plain"),
+        "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4), mean_trace (the padded sum "
+        "between the starts' mean traces, a distance between trace distributions), or plain (one trace "
+        "per start, as in a deterministic world: the figure the estimators are compared with)",
+        choices=("mode", "mean", "mean_trace", "plain"),
+    )
+    stochastic_gamma: float = option(
+        0.99,
+        "tabular learner in a stochastic world: LSPI discount (a long horizon: the safe way round, not the "
+        "short risky one)",
+        min=0.0,
+        max=0.999,
+    )
+    stochastic_samples: int = option(
+        50_000, "tabular learner in a stochastic world: LSPI samples kept (the average of many outcomes)", min=10
     )
     frames: str = option(
         "auto",
@@ -298,6 +309,7 @@ def embed_job(
     dtw_penalty: float = 1.0,
     rotations: tuple[int, list[list[int]]] | None = None,
     n_actions: int = 0,
+    reached: list[list[bool]] | None = None,
 ) -> dict[str, Any]:
     """Trace distances and classical MDS of each start's sampled traces (one sample each in a
     deterministic world): edit distance of discrete actions (in the start's frame when `rotations`,
@@ -307,7 +319,9 @@ def embed_job(
     if rotations is not None and actions is None:
         rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
         traces = [[frame_trace(t, rot, n_actions) for t in s] for s in traces]
-    if any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
+    if any(len(t) > 1 for t in traces) and estimator == "mean_trace" and actions is None:
+        D = mean_trace_distances(traces, n_actions, reached)
+    elif any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
         D = mean_pair_distances(traces, substitution_cost=2)
     else:
         canon = [list(mode_trace(t)) for t in traces]
@@ -569,6 +583,7 @@ class GenericProgram(Program):
             return
         self.stochastic = True
         self._transitions.clear()
+        self._plan_for_chance()
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
@@ -578,6 +593,19 @@ class GenericProgram(Program):
                 reason="stochastic",
             )
         )
+
+    def _plan_for_chance(self) -> None:
+        """The tabular learner in a stochastic world learns the expected outcome over a long horizon
+        (`stochastic_gamma`) from more of its experience (`stochastic_samples`); as given otherwise."""
+        if self.tabular:
+            chance = self.stochastic
+            self.lspi.gamma = self.params.stochastic_gamma if chance else self.params.gamma
+            self.lspi.capacity = cap = self.params.stochastic_samples if chance else self.params.max_samples
+            smp = self.lspi.samples()
+            if len(smp["s"]) > cap:  # back to fewer: the newest are kept
+                self.lspi.restore(
+                    {k: v[-cap:] if k in ("s", "a", "r", "s_next", "done") else v for k, v in smp.items()}
+                )
 
     # the program -------------------------------------------------------------------------------
     def _iterate(self) -> None:
@@ -672,6 +700,7 @@ class GenericProgram(Program):
             sw.traces, sw.reached = sw.traces[::k], sw.reached[::k]
             sw.repeats, k, sw.rewarded = 1, 1, sum(sw.reached)
             self.stochastic = False
+            self._plan_for_chance()
             self.emit(
                 EventOutput(
                     EventKind.POLICY_ITERATION,
@@ -747,6 +776,7 @@ class GenericProgram(Program):
             "embed",
             embed_job,
             traces=per_start,
+            reached=[list(self._sweep.reached[i * k : (i + 1) * k]) for i in range(n)],
             actions=None if self.discrete else self.actions.copy(),
             dims=self.dims,
             estimator=prm.estimator,
@@ -1043,6 +1073,8 @@ class GenericProgram(Program):
 
     def restore(self, state: dict[str, Any]) -> None:
         super().restore(state)
+        self.stochastic = bool(state.get("stochastic", False))
+        self._plan_for_chance()  # the capacity the saved samples were kept under
         self.lspi.restore(state["lspi"])
         self.phase, self.new_samples = str(state["phase"]), int(state["new_samples"])
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
@@ -1051,7 +1083,6 @@ class GenericProgram(Program):
         self._prev_x = None if px is None else np.asarray(px, dtype=np.float64)
         pk = state.get("prev_key")
         self._prev_key = None if pk is None else bytes.fromhex(str(pk))
-        self.stochastic = bool(state.get("stochastic", False))
         self._sweep = self._new_sweep()
         self._sweep.restore(state["sweep"])
         self._perf = [float(v) for v in state["perf"]]
