@@ -135,6 +135,9 @@ class GenericProgramParams:
     stochastic_samples: int = option(
         50_000, "tabular learner in a stochastic world: LSPI samples kept (the average of many outcomes)", min=10
     )
+    learn_in_sweeps: bool = option(
+        False, "tabular learner in a stochastic world: the sweeps' steps are LSPI samples too"
+    )
     frames: str = option(
         "auto",
         "discrete actions: compare traces in the frame of the start when some actions are rotations "
@@ -269,12 +272,15 @@ def iterate_job(
     basis: dict[str, Any] | None,
     refit: np.ndarray | None,
     fit: dict[str, Any],
+    tie_tolerance: float = 0.05,
 ) -> dict[str, Any]:
     """Feature refit (when `refit` holds the reservoir sample) and up to `iterations` LSPI
     iterations over a snapshot of the samples: the new basis (if refitted), weights, iterations
     done and the last change. Tabular when `store` is None. A pure function, run off the act path."""
     if store is None:
-        lspi = LSPI(TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=capacity)
+        lspi = LSPI(
+            TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=capacity, tie_tolerance=tie_tolerance
+        )
     else:
         rbf = _RBFFeatures(np.asarray(store), n_actions, int(fit["centres"]))
         if refit is not None:
@@ -284,7 +290,7 @@ def iterate_job(
         else:
             assert basis is not None
             _set_basis(rbf, basis)
-        lspi = LSPI(rbf, gamma=gamma, ridge=ridge, capacity=capacity)
+        lspi = LSPI(rbf, gamma=gamma, ridge=ridge, capacity=capacity, tie_tolerance=tie_tolerance)
     lspi.restore(samples)
     change, done = 0.0, 0
     for _ in range(iterations):  # policy iteration until the weights settle
@@ -437,6 +443,7 @@ class GenericProgram(Program):
         self._seen = 0
         self._fitted_at = 0
         self.lspi = LSPI(basis, gamma=prm.gamma, ridge=prm.ridge, capacity=prm.max_samples)
+        self._tie_tolerance = self.lspi.tie_tolerance
         self.phase = "explore"
         self.new_samples = 0
         self.relearn_at: int | None = None
@@ -459,6 +466,7 @@ class GenericProgram(Program):
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self._start_scores: list[float] = []  # scores of the start state in progress (one per sample)
         self._start_fair = True  # all of them came from the accepted policy's choices
+        self._sweep_prev: tuple[int, int] | None = None  # stochastic tabular: the sweep's last (state, action)
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
         self.use_background(prm.learn_lag)
@@ -599,7 +607,10 @@ class GenericProgram(Program):
         (`stochastic_gamma`) from more of its experience (`stochastic_samples`); as given otherwise."""
         if self.tabular:
             chance = self.stochastic
-            self.lspi.gamma = self.params.stochastic_gamma if chance else self.params.gamma
+            self.lspi.gamma = g = self.params.stochastic_gamma if chance else self.params.gamma
+            # near-ties: a quarter of the gap 1 - gamma^2 between an optimal action and a detour
+            # (0.05 at the default 0.9; at 0.99 a detour is within 2 % and would pass for a tie)
+            self.lspi.tie_tolerance = 0.25 * (1.0 - g * g) if chance else self._tie_tolerance
             self.lspi.capacity = cap = self.params.stochastic_samples if chance else self.params.max_samples
             smp = self.lspi.samples()
             if len(smp["s"]) > cap:  # back to fewer: the newest are kept
@@ -632,6 +643,7 @@ class GenericProgram(Program):
             basis=None if self.tabular else _basis_state(self._rbf),
             refit=refit,
             fit={"components": prm.components, "centres": prm.centres, "width": prm.width},
+            tie_tolerance=self.lspi.tie_tolerance,
         )
 
     def _iterated(self, result: dict[str, Any], step: int) -> None:
@@ -685,6 +697,7 @@ class GenericProgram(Program):
         self._diverged = False
         self._unfed = []
         self._start_scores, self._start_fair = [], True
+        self._sweep_prev = None
         # a random order: the detector then sees trace scores in no spatial order (a run of far
         # starts, long traces, would look like a drop)
         return self._sweep.begin([int(i) for i in self.rng.permutation(self.spec.n_starts)])
@@ -964,9 +977,20 @@ class GenericProgram(Program):
             self.sarsa.begin_episode()
         self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
 
+    def _learn_from_sweep(self, obs: Observation, dec: Decision) -> None:
+        """Tabular learner in a stochastic world: a sweep's steps are samples of the world too (LSPI
+        learns off-policy), and many: the sampled traces are most of the experience there."""
+        if obs.t > 0 and self._sweep_prev is not None:
+            ps, pa = self._sweep_prev
+            self.lspi.learn_one(ps, pa, self._goal_reward(obs), self._table_id(obs), self._terminal(obs))
+            self.new_samples += 1
+        self._sweep_prev = None if dec.reset else (self._table_id(obs), int(dec.values[0]))
+
     def _sweep_act(self, obs: Observation) -> Decision:
         n_before = len(self._sweep.traces)
         dec = self._sweep.step(obs, self._choose, self._cycle)
+        if self.tabular and self.stochastic and self.params.learn_in_sweeps:
+            self._learn_from_sweep(obs, dec)
         if len(self._sweep.traces) > n_before:
             # a trace ended: its score goes to the detector now when it is the accepted policy's own
             # trace (a check sweep, or a newer policy that chose as the accepted one at every step),
@@ -1022,6 +1046,7 @@ class GenericProgram(Program):
 
     def world_restarted(self) -> None:
         self._prev, self._prev_x, self._prev_key = None, None, None
+        self._sweep_prev = None
         self._sweep.interrupted()
         self._visited = set()
 
@@ -1059,6 +1084,7 @@ class GenericProgram(Program):
             "unfed": list(self._unfed),
             "start_scores": list(self._start_scores),
             "start_fair": self._start_fair,
+            "sweep_prev": None if self._sweep_prev is None else list(self._sweep_prev),
             "rotations": None
             if self._rotations is None
             else [self._rotations.order, [list(p) for p in self._rotations.powers]],
@@ -1110,6 +1136,8 @@ class GenericProgram(Program):
         self._unfed = [float(v) for v in state.get("unfed", [])]
         self._start_scores = [float(v) for v in state.get("start_scores", [])]
         self._start_fair = bool(state.get("start_fair", True))
+        sp = state.get("sweep_prev")
+        self._sweep_prev = None if sp is None else (int(sp[0]), int(sp[1]))
         rot = state.get("rotations")
         self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
         if self.sarsa is not None:
