@@ -135,9 +135,6 @@ class GenericProgramParams:
     stochastic_samples: int = option(
         50_000, "tabular learner in a stochastic world: LSPI samples kept (the average of many outcomes)", min=10
     )
-    learn_in_sweeps: bool = option(
-        False, "tabular learner in a stochastic world: the sweeps' steps are LSPI samples too"
-    )
     frames: str = option(
         "auto",
         "discrete actions: compare traces in the frame of the start when some actions are rotations "
@@ -466,7 +463,6 @@ class GenericProgram(Program):
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self._start_scores: list[float] = []  # scores of the start state in progress (one per sample)
         self._start_fair = True  # all of them came from the accepted policy's choices
-        self._sweep_prev: tuple[int, int] | None = None  # stochastic tabular: the sweep's last (state, action)
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
         self.use_background(prm.learn_lag)
@@ -697,7 +693,6 @@ class GenericProgram(Program):
         self._diverged = False
         self._unfed = []
         self._start_scores, self._start_fair = [], True
-        self._sweep_prev = None
         # a random order: the detector then sees trace scores in no spatial order (a run of far
         # starts, long traces, would look like a drop)
         return self._sweep.begin([int(i) for i in self.rng.permutation(self.spec.n_starts)])
@@ -977,20 +972,9 @@ class GenericProgram(Program):
             self.sarsa.begin_episode()
         self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
 
-    def _learn_from_sweep(self, obs: Observation, dec: Decision) -> None:
-        """Tabular learner in a stochastic world: a sweep's steps are samples of the world too (LSPI
-        learns off-policy), and many: the sampled traces are most of the experience there."""
-        if obs.t > 0 and self._sweep_prev is not None:
-            ps, pa = self._sweep_prev
-            self.lspi.learn_one(ps, pa, self._goal_reward(obs), self._table_id(obs), self._terminal(obs))
-            self.new_samples += 1
-        self._sweep_prev = None if dec.reset else (self._table_id(obs), int(dec.values[0]))
-
     def _sweep_act(self, obs: Observation) -> Decision:
         n_before = len(self._sweep.traces)
         dec = self._sweep.step(obs, self._choose, self._cycle)
-        if self.tabular and self.stochastic and self.params.learn_in_sweeps:
-            self._learn_from_sweep(obs, dec)
         if len(self._sweep.traces) > n_before:
             # a trace ended: its score goes to the detector now when it is the accepted policy's own
             # trace (a check sweep, or a newer policy that chose as the accepted one at every step),
@@ -1046,7 +1030,6 @@ class GenericProgram(Program):
 
     def world_restarted(self) -> None:
         self._prev, self._prev_x, self._prev_key = None, None, None
-        self._sweep_prev = None
         self._sweep.interrupted()
         self._visited = set()
 
@@ -1084,7 +1067,6 @@ class GenericProgram(Program):
             "unfed": list(self._unfed),
             "start_scores": list(self._start_scores),
             "start_fair": self._start_fair,
-            "sweep_prev": None if self._sweep_prev is None else list(self._sweep_prev),
             "rotations": None
             if self._rotations is None
             else [self._rotations.order, [list(p) for p in self._rotations.powers]],
@@ -1136,8 +1118,6 @@ class GenericProgram(Program):
         self._unfed = [float(v) for v in state.get("unfed", [])]
         self._start_scores = [float(v) for v in state.get("start_scores", [])]
         self._start_fair = bool(state.get("start_fair", True))
-        sp = state.get("sweep_prev")
-        self._sweep_prev = None if sp is None else (int(sp[0]), int(sp[1]))
         rot = state.get("rotations")
         self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
         if self.sarsa is not None:
