@@ -234,3 +234,13 @@ def test_a_world_whose_sampled_traces_never_differ_goes_back_to_one_trace_per_st
     embs = [e for e in run.embeddings if e.procrustes_error is not None]
     assert all(e.metrics["samples_per_start"] == 1.0 for e in embs) and embs[-1].procrustes_error < 0.1
     assert not run.events(EventKind.DROP_DETECTED)
+
+
+def test_slippery_frozenlake_is_embedded_from_mean_traces_of_a_long_horizon_policy():
+    with make_world("gym:FrozenLake-v1", None, 2) as w:
+        program = make_program(w.spec(), 2, estimator="mean_trace", samples=64)
+        run = run_inprocess(w, program, 40_000, stop_when=lambda r: bool(r.embeddings))
+    assert program.stochastic and program.lspi.gamma == 0.99 and abs(program.lspi.tie_tolerance - 0.005) < 1e-3
+    e = run.embeddings[0]
+    assert e.metrics["stochastic"] == 1.0 and e.metrics["samples_per_start"] == 64.0
+    assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: about 0.5 (docs/zoo.md)

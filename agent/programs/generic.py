@@ -459,6 +459,7 @@ class GenericProgram(Program):
         self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
         self._sweep_rbf: _RBFFeatures | None = None  # that basis while the accepted policy is swept
         self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
+        self._candidate_traces: list[list[int]] | None = None  # a better policy's traces, not yet confirmed
         self._diverged = False  # the trace in progress left the accepted policy's choices
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self._start_scores: list[float] = []  # scores of the start state in progress (one per sample)
@@ -738,12 +739,22 @@ class GenericProgram(Program):
             # the newest policy is worse than the accepted one: not published, not judged by the
             # detector; the accepted policy is swept again, so that a changed world still shows
             return self._start_sweep(check=True)
+        traces = [list(t) for t in sw.traces]
+        if self._watching and not self._checking and better and not same and self.tabular and not self.stochastic:
+            if traces != self._candidate_traces:
+                # a better policy, seen once: published when the next policy iteration keeps its
+                # traces - a policy still changing from one iteration to the next has not converged,
+                # and the maps of its passing detours can be far worse than the accepted one
+                self._candidate_traces = traces
+                self._perf.extend(self._unfed)  # better than the accepted policy: its scores are fair
+                return None
         if self._watching or good:  # the scores not yet fed as their traces ended (see `_sweep_act`)
             self._perf.extend(self._unfed)
         relearned = good and self.relearn_at is not None
         if not self._checking and (better or not self._watching):
             self._accepted, self._best = np.array(self._sweep_w, copy=True), score
-            self._accepted_traces = [list(t) for t in sw.traces]
+            self._accepted_traces = traces
+            self._candidate_traces = None
             self._accepted_basis = None if self.learner != "lspi" else _basis_state(self._rbf)
         self._watching = self._watching or good
         self._embed(step, relearned, k)
@@ -1020,7 +1031,7 @@ class GenericProgram(Program):
         self._perf.clear()
         self._watching = False
         self._accepted, self._best, self._checking = None, None, False
-        self._accepted_traces = None
+        self._accepted_traces, self._candidate_traces = None, None
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
         self._rotations = None
@@ -1065,6 +1076,7 @@ class GenericProgram(Program):
             "diverged": self._diverged,
             "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
             "unfed": list(self._unfed),
+            "candidate_traces": None if self._candidate_traces is None else [list(t) for t in self._candidate_traces],
             "start_scores": list(self._start_scores),
             "start_fair": self._start_fair,
             "rotations": None
@@ -1116,6 +1128,8 @@ class GenericProgram(Program):
         at = state.get("accepted_traces")
         self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
         self._unfed = [float(v) for v in state.get("unfed", [])]
+        ct = state.get("candidate_traces")
+        self._candidate_traces = None if ct is None else [[int(a) for a in t] for t in ct]
         self._start_scores = [float(v) for v in state.get("start_scores", [])]
         self._start_fair = bool(state.get("start_fair", True))
         rot = state.get("rotations")
