@@ -44,6 +44,14 @@ ZOO: tuple[ZooWorld, ...] = (
     ZooWorld("FrozenLake 4x4 slippery", "gym:FrozenLake-v1", {}, {}, 60_000, 20_000),
     ZooWorld("FrozenLake 4x4 slippery, mean estimator", "gym:FrozenLake-v1", {}, {"estimator": "mean"}, 60_000, 20_000),
     ZooWorld(
+        "FrozenLake 4x4 slippery, mean trace",
+        "gym:FrozenLake-v1",
+        {},
+        {"estimator": "mean_trace", "samples": "64"},
+        100_000,
+        30_000,
+    ),
+    ZooWorld(
         "FrozenLake 4x4 slippery, plain estimator", "gym:FrozenLake-v1", {}, {"estimator": "plain"}, 60_000, 20_000
     ),
     ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 30_000, 10_000),
