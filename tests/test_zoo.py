@@ -243,4 +243,4 @@ def test_slippery_frozenlake_is_embedded_from_mean_traces_of_a_long_horizon_poli
     assert program.stochastic and program.lspi.gamma == 0.99 and abs(program.lspi.tie_tolerance - 0.005) < 1e-3
     e = run.embeddings[0]
     assert e.metrics["stochastic"] == 1.0 and e.metrics["samples_per_start"] == 64.0
-    assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: about 0.5 (docs/zoo.md)
+    assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: 0.71 (docs/zoo.md)
