@@ -25,9 +25,16 @@ continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time w
 (`distance=dtw`, with a cost per repeated step so trace length stays in it). Discrete traces are
 compared with the edit distance.
 
+Egocentric actions: the tabular learner finds which actions are rotations (repeated, they come
+back to where they started) and compares traces in the frame of their start
+(`agent.embedding.rotation_frames`; `frames=off` to compare them as they are).
+
 A world whose transitions are seen to be stochastic (the same observation and action led to
 different observations) is embedded from `samples` traces per start state with the ch. 9.4
-estimators (`estimator`: the mode trace or the mean pairwise distance); the embedding says so.
+estimators (`estimator`: the mode trace or the mean pairwise distance) or the padded sum between
+mean traces (`mean_trace`); the embedding says so. The tabular learner there plans with discount
+`stochastic_gamma` over up to `stochastic_samples` samples. A sweep whose samples are one trace for
+every start takes the world back to one trace per start.
 
 Phases alternate: *learn* until `samples_per_iteration` new samples (LSPI: then features are
 refitted and LSPI iterates off the act path) or `embed_every` steps (Sarsa, which learns on every
@@ -319,11 +326,13 @@ def embed_job(
     (order, [[action, power], ...]), says which actions turn: `frame_trace`); the padded sum or DTW
     of the action values when `actions` is the table of a discretised box. Several samples: the mode
     trace, or the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
+    symbols = n_actions
     if rotations is not None and actions is None:
         rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
         traces = [[frame_trace(t, rot, n_actions) for t in s] for s in traces]
+        symbols = n_actions * (1 + rot.order)  # the labels frame_trace gives
     if any(len(t) > 1 for t in traces) and estimator == "mean_trace" and actions is None:
-        D = mean_trace_distances(traces, n_actions, reached)
+        D = mean_trace_distances(traces, symbols, reached)
     elif any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
         D = mean_pair_distances(traces, substitution_cost=2)
     else:
