@@ -102,10 +102,26 @@ def report_summary(src: Source, text: str) -> str:
         f"| {totals[report.NOT_MET]} | {totals[report.NOT_COMPARABLE]} |"
     )
     rel = folder.relative_to(DOCS)
-    return (
+    out = (
         "\n".join(lines)
         + f"\n\nFrom `{src.command}` (its `run.json` and each chapter's `results.json`: `docs/{rel}/`)."
     )
+    load = folder / "load.log"  # `date +%T` and /proc/loadavg, sampled every minute while it ran
+    if load.exists():
+        one = [float(ln.split()[1]) for ln in load.read_text().splitlines() if ln.strip()]
+        out += (
+            f" The machine's 1-minute load average while it ran: {min(one):.1f} to {max(one):.1f} "
+            f"(median {sorted(one)[len(one) // 2]:.1f}; {len(one)} samples of `/proc/loadavg`, `docs/{rel}/load.log`)."
+        )
+    cpu = folder / "cpu.log"  # CPU seconds of the run's processes (the command and its workers), sampled
+    if cpu.exists():
+        used = [int(ln.split("cpu_s=")[1]) for ln in cpu.read_text().splitlines() if "cpu_s=" in ln]
+        if used:
+            out += (
+                f" CPU time of the run's own processes: {used[-1]:,} s at the last sample (`docs/{rel}/cpu.log`), "
+                f"that is {used[-1] / 2 / 60:.0f} min on 2 cores kept busy."
+            )
+    return out
 
 
 def lesion_sweep_table(src: Source, text: str) -> str:
