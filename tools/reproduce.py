@@ -717,14 +717,24 @@ def _run_chapter(
     """Run one chapter into OUT/NAME (results.json, table.md, plots); return its result, folder and seconds."""
     out = os.path.join(args.out, name)
     os.makedirs(out, exist_ok=True)
-    t0 = time.time()
+    t0, cpu0 = time.time(), cpu_seconds()
     with use_cluster(getattr(args, "cluster", None)):
         res = fn(args.runs, args.quick, args.workers, out)
+    res.setdefault("cpu_seconds", cpu_seconds() - cpu0)
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(res, f, default=float)
     with open(os.path.join(out, "table.md"), "w") as f:
         f.write(res["markdown"] + "\n")
     return res, out, time.time() - t0
+
+
+def cpu_seconds() -> float:
+    """CPU time (user + system) of this process and of its finished worker processes: a chapter's
+    cost apart from how busy the machine is (its wall time on idle cores is about this / workers)."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def _where(args: argparse.Namespace) -> str:
@@ -851,13 +861,16 @@ def main_all(args: argparse.Namespace) -> int:
             )
             continue
         chapters.append(_chapter_report(name, res, out, seconds, args.quick))
-        meta["chapters"][name] = {"seconds": seconds, "error": None}
+        meta["chapters"][name] = {"seconds": seconds, "cpu_seconds": res.get("cpu_seconds"), "error": None}
         save_meta()
         rows = chapters[-1].rows
         verdicts = ", ".join(
             f"{sum(r.verdict == v for r in rows)} {v}" for v in (report.MET, report.NOT_MET, report.NOT_COMPARABLE)
         )
-        print(f"[{i}/{len(names)}] {name} done in {seconds:.0f} s: {verdicts}", flush=True)
+        print(
+            f"[{i}/{len(names)}] {name} done in {seconds:.0f} s ({res['cpu_seconds']:.0f} s of CPU): {verdicts}",
+            flush=True,
+        )
     total = time.time() - t_all
     meta["total"] = total
     save_meta()

@@ -84,21 +84,29 @@ def report_summary(src: Source, text: str) -> str:
     meta = json.loads(text)
     folder = (DOCS / src.file).parent
     quick = "--quick" in src.command
-    lines = ["| chapter | wall time | met | not met | not comparable |", "|---|---|---|---|---|"]
+    lines = ["| chapter | wall time | CPU time | met | not met | not comparable |", "|---|---|---|---|---|---|"]
+
+    def cpu(info: dict) -> str:
+        c = info.get("cpu_seconds")
+        return "not recorded" if c is None else f"{c:.0f} s"
+
     totals = dict.fromkeys((report.MET, report.NOT_MET, report.NOT_COMPARABLE), 0)
     for name, info in meta["chapters"].items():
         if info.get("error"):
-            lines.append(f"| {name} | {info['seconds']:.0f} s | failed | | |")
+            lines.append(f"| {name} | {info['seconds']:.0f} s | {cpu(info)} | failed | | |")
             continue
         rows = report.chapter_rows(name, json.loads((folder / name / "results.json").read_text()), quick)
         n = {v: sum(r.verdict == v for r in rows) for v in totals}
         totals = {v: totals[v] + n[v] for v in totals}
         lines.append(
-            f"| {name} | {info['seconds']:.0f} s | {n[report.MET]} | {n[report.NOT_MET]} | {n[report.NOT_COMPARABLE]} |"
+            f"| {name} | {info['seconds']:.0f} s | {cpu(info)} | {n[report.MET]} | {n[report.NOT_MET]} "
+            f"| {n[report.NOT_COMPARABLE]} |"
         )
     total = meta.get("total")
+    cpus = [c.get("cpu_seconds") for c in meta["chapters"].values()]
+    cpu_all = "not recorded" if None in cpus else f"{sum(cpus):.0f} s"
     lines.append(
-        f"| all | {'unknown' if total is None else f'{total:.0f} s ({total / 60:.1f} min)'} | {totals[report.MET]} "
+        f"| all | {'unknown' if total is None else f'{total:.0f} s ({total / 60:.1f} min)'} | {cpu_all} | {totals[report.MET]} "
         f"| {totals[report.NOT_MET]} | {totals[report.NOT_COMPARABLE]} |"
     )
     rel = folder.relative_to(DOCS)
@@ -206,12 +214,9 @@ SOURCES["report-quick"] = Source(QUICK_ALL, "reproduce/report-quick/run.json", r
 for _chapter, _block in (
     ("retina", "retina-quick"),
     ("retina-natural", "retina-natural-quick"),
-    ("mountaincar", "mountaincar-quick"),
     ("gridworld", "gridworld-all-quick"),
 ):
-    SOURCES[_block] = Source(
-        f"{QUICK_ALL} (its {_chapter} chapter)", f"reproduce/report-quick/{_chapter}/results.json", reproduce_table
-    )
+    SOURCES[_block] = Source(QUICK_ALL, f"reproduce/report-quick/{_chapter}/results.json", reproduce_table)
 
 
 def render(name: str) -> str:
