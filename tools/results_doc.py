@@ -186,28 +186,6 @@ SOURCES["bench-detectors"] = Source(
         lambda r: r.get("streams") == "synthetic",
     ),
 )
-SOURCES["bench-loop"] = Source(
-    "sme bench loop --steps 20000 --json",
-    "results/bench-loop/output.jsonl",
-    jsonl_table(
-        (
-            ("mode", "mode"),
-            ("steps", "steps"),
-            ("steps/s", "steps_per_s"),
-            ("p50 (ms)", "p50_ms"),
-            ("p99 (ms)", "p99_ms"),
-            ("in-process / zenoh", "inprocess_over_zenoh_steps_per_s"),
-            ("meets 2,000 steps/s and p99 <= 2 ms", "meets_target"),
-        )
-    ),
-)
-SOURCES["bench-world"] = Source(
-    "sme bench world --world retina --json",
-    "results/bench-world/output.jsonl",
-    jsonl_table(
-        (("world", "world"), ("params", "params"), ("steps/s", "steps_per_s"), ("vs a raw frame", "ratio_to_raw_frame"))
-    ),
-)
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
 QUICK_ALL = "sme reproduce all --quick --runs 10"
 SOURCES["report-quick"] = Source(QUICK_ALL, "reproduce/report-quick/run.json", report_summary)
