@@ -144,7 +144,8 @@ def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
 
 def job_retina(kind: str, *args: Any) -> dict:
     """One retina job of `sme reproduce retina` by name (one pool runs all three experiments)."""
-    return {"learning": job_learning, "lesion": job_lesion, "reversal": job_reversal}[kind](*args)
+    jobs: dict[str, Callable[..., dict]] = {"learning": job_learning, "lesion": job_lesion, "reversal": job_reversal}
+    return jobs[kind](*args)
 
 
 def job_vergence(seed: int, world: str, iterations: int) -> dict:

@@ -121,15 +121,30 @@ def report_summary(src: Source, text: str) -> str:
             f" The machine's 1-minute load average while it ran: {min(one):.1f} to {max(one):.1f} "
             f"(median {sorted(one)[len(one) // 2]:.1f}; {len(one)} samples of `/proc/loadavg`, `docs/{rel}/load.log`)."
         )
-    cpu = folder / "cpu.log"  # CPU seconds of the run's processes (the command and its workers), sampled
-    if cpu.exists():
-        used = [int(ln.split("cpu_s=")[1]) for ln in cpu.read_text().splitlines() if "cpu_s=" in ln]
-        if used:
-            out += (
-                f" CPU time of the run's own processes: {used[-1]:,} s at the last sample (`docs/{rel}/cpu.log`), "
-                f"that is {used[-1] / 2 / 60:.0f} min on 2 cores kept busy."
-            )
     return out
+
+
+def runs10_estimate(src: Source, text: str) -> str:
+    """From a `sme reproduce all --quick --runs 1` folder: each chapter's CPU time, and that times
+    ten over two cores, the arithmetic estimate of the chapter's wall time at ``--runs 10`` on two
+    idle cores (an upper bound for the chapters whose jobs do not all grow with the runs: the one
+    live mountain-car run, chapter 9's state-aided vergence)."""
+    meta = json.loads(text)
+    lines = [
+        "| chapter | CPU time at `--runs 1` | x 10 runs / 2 cores |",
+        "|---|---|---|",
+    ]
+    total = 0.0
+    for name, info in meta["chapters"].items():
+        c = info.get("cpu_seconds")
+        if c is None:
+            lines.append(f"| {name} | {'failed' if info.get('error') else 'not recorded'} | |")
+            continue
+        total += c
+        lines.append(f"| {name} | {c:.0f} s | {c * 10 / 2 / 60:.1f} min |")
+    lines.append(f"| all | {total:.0f} s | {total * 10 / 2 / 60:.1f} min |")
+    rel = (DOCS / src.file).parent.relative_to(DOCS)
+    return "\n".join(lines) + f"\n\nFrom `{src.command}` (its `run.json`: `docs/{rel}/run.json`)."
 
 
 def lesion_sweep_table(src: Source, text: str) -> str:
