@@ -204,6 +204,14 @@ SOURCES["bench-detectors"] = Source(
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
 QUICK_ALL = "sme reproduce all --quick --runs 10"
 SOURCES["report-quick"] = Source(QUICK_ALL, "reproduce/report-quick/run.json", report_summary)
+SOURCES["report-quick-runs1"] = Source(
+    "nice -n 10 sme reproduce all --quick --runs 1 --workers 2", "reproduce/report-quick-runs1/run.json", report_summary
+)
+SOURCES["runs1-estimate"] = Source(
+    "nice -n 10 sme reproduce all --quick --runs 1 --workers 2",
+    "reproduce/report-quick-runs1/run.json",
+    runs10_estimate,
+)
 for _chapter, _block in (
     ("retina", "retina-quick"),
     ("retina-natural", "retina-natural-quick"),
