@@ -32,7 +32,15 @@ def main(seeds: int, seconds: float, every: float = 2.0, params: list[str] | Non
     seen: dict[int, dict[str, Any]] = {}
     t0 = time.monotonic()
     try:
-        with Bus(BusConfig.for_role("tool", endpoint)) as bus:
+        bus = None
+        while bus is None:  # the agent takes a moment to listen
+            try:
+                bus = Bus(BusConfig.for_role("tool", endpoint))
+            except BusError:
+                if time.monotonic() - t0 > 60:
+                    raise
+                time.sleep(0.5)
+        with bus:
             while time.monotonic() - t0 < seconds:
                 try:
                     st = fetch_status(bus, "a0", 2.0)
