@@ -194,6 +194,11 @@ SOURCES: dict[str, Source] = {
     ),
     "lesion-sweep": Source("", "results/lesion-sweep/lesion_sweep.json", lesion_sweep_table),
     "arm": Source("sme reproduce arm --runs 5", "results/arm/results.json", reproduce_table),
+    "arm-live": Source(
+        "python -m sensorimotor.tools.experiments.arm_live --seeds 5 --seconds 480",
+        "results/arm-live/output.txt",
+        command_output,
+    ),
     "bench-world-arm": Source("sme bench world --world arm", "results/bench-world-arm/output.txt", command_output),
 }
 SOURCES["detectors-quick"] = Source(
