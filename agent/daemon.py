@@ -40,7 +40,8 @@ from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.lease import LeaseClient, Outcome, lost_by
 from sensorimotor.agent.link import WorldLink, check_truth
 from sensorimotor.agent.ownership import OwnerBook, claim_key, plan
-from sensorimotor.agent.programs.registry import check_program_params, make_program
+from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, make_program
+from sensorimotor.agent.rate_limit import TokenBucket
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
@@ -61,6 +62,17 @@ from sensorimotor.protocol.messages import (
 from sensorimotor.protocol.params import as_strings, parse
 
 log = logging.getLogger("sme.agent")
+
+
+def _import_programs() -> None:
+    """Import every program's module now, beside the first worlds, not inside a later attach: the
+    first world of a kind would otherwise hold the process (its GIL) for the import, ~1.5 s for the
+    generic program's scipy.stats and filterpy, while its lockstep worlds wait for their answers."""
+    for kind in PROGRAMS.values():
+        try:
+            kind.program_class()
+        except Exception as e:  # noqa: BLE001 - a broken optional dependency: the attach reports it
+            log.debug("program module %s not imported: %s", kind.module, e)
 
 
 class _Unrestorable(Exception):
@@ -214,8 +226,20 @@ class AgentDaemon:
         self._pubs: dict[str, Any] = {}
         self._versions: dict[str, int] = {}  # world -> embedding version high-water mark written
         self._lock = threading.Lock()
+        # log lines about refused input (bad truths, world events, checkpoints; worlds that cannot be
+        # attached): a few per second at most, every item still counted (hostile input comes at bus speed)
+        self._warnings = TokenBucket(self.WARN_RATE)
         if state_dir:
             os.makedirs(state_dir, exist_ok=True)
+
+    WARN_RATE = 5.0  # log lines per second about refused input, at most (see `_warn`)
+
+    def _warn(self, fmt: str, *args: Any) -> None:
+        """Log a warning about refused input, rate-limited (`WARN_RATE`); the next line that gets
+        through says how many were left out. The counters count every item."""
+        if self._warnings.take():
+            n = self._warnings.suppressed()
+            log.warning(fmt + (f" ({n} similar warnings not logged)" if n else ""), *args)
 
     # publishing --------------------------------------------------------------------------------
     def _publisher(self, key: str, schema: str) -> Any:
@@ -340,11 +364,11 @@ class AgentDaemon:
             shared = codec.decode(SharedCheckpoint, msg.payload)
         except ProtocolError as e:
             self.counters["bad_checkpoint"] += 1
-            log.warning("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], clip(str(e)))
+            self._warn("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], clip(str(e)))
             return
         if shared.world_id != wid:
             self.counters["bad_checkpoint"] += 1
-            log.warning(
+            self._warn(
                 "checkpoint shared by %s on world %s's key is for world %s: refused",
                 owner[:64],
                 wid[:64],
@@ -354,7 +378,7 @@ class AgentDaemon:
         why = self.store.offer(owner, wid, shared.data)
         if why is not None:
             self.counters["bad_checkpoint"] += 1
-            log.warning("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], why)
+            self._warn("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], why)
 
     def _on_embedding(self, msg: BusMessage) -> None:
         """Note the embedding version any agent published (a takeover says when its copy is older)."""
@@ -399,7 +423,7 @@ class AgentDaemon:
             check_truth(truth, link.world_id)
         except ProtocolError as e:
             self.counters["bad_truth"] += 1
-            log.warning("world %s: bad truth message: %s", link.world_id, e)
+            self._warn("world %s: bad truth message: %s", link.world_id, e)
             return
         link.truth = truth
 
@@ -413,7 +437,7 @@ class AgentDaemon:
                 raise SpecMismatch(f"world event for world {ev.world_id!r} arrived on {link.world_id!r}'s key")
         except ProtocolError as e:
             self.counters["bad_world_event"] += 1
-            log.warning("world %s: bad world event: %s", link.world_id, e)
+            self._warn("world %s: bad world event: %s", link.world_id, e)
             return
         if ev.kind == WorldEventKind.LEASE_LOST:
             if link.state == "attached" and lost_by(ev, self.owner_id, link.epoch):
@@ -784,7 +808,7 @@ class AgentDaemon:
             return out
         if out.unfenced:
             self.counters["unfenced"] += 1
-            log.warning(
+            self._warn(
                 "world %s answers no lease request (a world written before leases): answered unfenced, "
                 "only the claim protocol keeps a second owner away",
                 wid,
@@ -906,7 +930,7 @@ class AgentDaemon:
                 self._failed.discard(w)  # no spec reply last time (a route being rebuilt?): once more
                 self._retry_spec.pop(w, None)
                 self._retried.add(w)  # a second failure is not counted or reported again
-            if w in self._failed or any(o < self.owner_id for o in self.book.view().claimants(w)):
+            if w in self._failed or any(o < self.owner_id for o in self.book.claimants(w)):
                 continue  # tried once this appearance / withdrawn at the next tick
             if now - self._waiting.get(w, float("-inf")) < self.LEASE_RETRY:
                 continue  # its lease is held by another owner: ask again in a moment
@@ -1015,7 +1039,7 @@ class AgentDaemon:
             log.debug("world %s: still cannot attach: %s", wid, clip(str(e)))
             return
         self.counters["attach_failed"] += 1
-        log.warning("world %s: cannot attach: %s", wid, clip(str(e)))
+        self._warn("world %s: cannot attach: %s", wid, clip(str(e)))
         self.event(wid, EventKind.ATTACH_FAILED, str(e), reason)
 
     def _detach(self, wid: str) -> None:
@@ -1098,21 +1122,34 @@ class AgentDaemon:
         self.bus.watch_alive(keys.ALL_ALIVE_WORLDS, self._on_alive, history=True)
         if self.workers:
             threading.Thread(target=self._poll_workers, name="poll-workers", daemon=True).start()
+        threading.Thread(target=_import_programs, name="import-programs", daemon=True).start()
+
+    TICK = 0.1  # seconds between two ownership ticks (however many liveliness changes came between)
 
     def run(self, seconds: float | None = None) -> None:
         """Process attach/detach until stop() or `seconds` elapse."""
         t0 = time.monotonic()
         last_ckpt = last_sweep = last_share = t0
+        last_tick = float("-inf")
         sweep_every = min(1.0, self.link_ttl / 2) if self.link_ttl is not None else None
         while not self._stop.is_set():
             if seconds is not None and time.monotonic() - t0 >= seconds:
                 break
             try:
-                wid, alive = self._changes.get(timeout=0.1)
+                changes = [self._changes.get(timeout=self.TICK)]
             except queue.Empty:
-                wid = None
-            if wid is not None and not alive:
-                self._detach(wid)
+                changes = []
+            while True:  # every change queued so far, then one tick for all of them
+                try:
+                    changes.append(self._changes.get_nowait())
+                except queue.Empty:
+                    break
+            for wid, alive in changes:
+                if not alive:
+                    self._detach(wid)
+            if time.monotonic() - last_tick < self.TICK:
+                continue  # a burst of liveliness changes (worlds, claims) is one tick, not one each
+            last_tick = time.monotonic()
             try:
                 self._handle_lost()
                 self.own()
