@@ -30,6 +30,7 @@ from sensorimotor.agent.checkpoint import (
     FORMAT_VERSION,
     Checkpoint,
     CheckpointError,
+    check_shapes,
     encode_checkpoint,
     read_checkpoint,
     set_aside_checkpoint,
@@ -527,7 +528,14 @@ class AgentDaemon:
             try:
                 restored = self._restore(spec, shared, "shared checkpoint")
             except _Unrestorable as e:
-                log.warning("world %s: the checkpoint shared on the bus %s", spec.world_id, e)
+                self.counters["bad_checkpoint"] += 1
+                log.warning("world %s: the checkpoint shared on the bus %s; set aside", spec.world_id, e)
+                self.event(
+                    spec.world_id,
+                    EventKind.BAD_INPUT,
+                    clip(f"checkpoint shared on the bus set aside: it {e}"),
+                    "bad_checkpoint",
+                )
                 self.store.drop(spec.world_id)
             else:
                 self.counters["taken_over"] += 1
@@ -578,11 +586,18 @@ class AgentDaemon:
                     saved.program_params,
                     wanted,
                 )
-            program.restore(saved.program_state)
             detector = None
             if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
                 detector = make_detector(self.detector, **program.detector_params)
+            # arrays of the shapes this world's program keeps, before anything is restored from them
+            check_shapes(saved.program_state, program.state(), "program_state")
+            if detector is not None and saved.detector_state is not None:
+                check_shapes(saved.detector_state, detector.state(), "detector_state")
+            program.restore(saved.program_state)
+            if detector is not None and saved.detector_state is not None:
                 detector.restore(saved.detector_state)
+        except CheckpointError as e:
+            raise _Unrestorable(f"does not fit this world's program: {e}") from None
         except (ValueError, KeyError, TypeError, IndexError, AttributeError, ProtocolError) as e:
             raise _Unrestorable(f"cannot be restored ({type(e).__name__}: {e})") from None
         return Restored(program, saved.version, detector, saved.steps)
@@ -1124,7 +1139,8 @@ class AgentDaemon:
             threading.Thread(target=self._poll_workers, name="poll-workers", daemon=True).start()
         threading.Thread(target=_import_programs, name="import-programs", daemon=True).start()
 
-    TICK = 0.1  # seconds between two ownership ticks (however many liveliness changes came between)
+    TICK = 0.1  # seconds between two ownership ticks when no world appeared or vanished
+    MIN_TICK = 0.02  # and when some did: however many, at most one tick per MIN_TICK (each tick is O(worlds))
 
     def run(self, seconds: float | None = None) -> None:
         """Process attach/detach until stop() or `seconds` elapse."""
@@ -1147,8 +1163,8 @@ class AgentDaemon:
             for wid, alive in changes:
                 if not alive:
                     self._detach(wid)
-            if time.monotonic() - last_tick < self.TICK:
-                continue  # a burst of liveliness changes (worlds, claims) is one tick, not one each
+            if time.monotonic() - last_tick < (self.MIN_TICK if changes else self.TICK):
+                continue  # a burst of worlds appearing or vanishing is one tick, not one each
             last_tick = time.monotonic()
             try:
                 self._handle_lost()

@@ -93,6 +93,7 @@ class Result:
     baseline_after: float = 0.0  # and in one after the counters settled (the machine's load drifts)
     fuzz_steps_per_s: float = 0.0  # its step rate while the hostile messages were sent
     step_rate_ratio: float = 0.0  # fuzz / baseline (the bar: >= 0.8)
+    settle_seconds: float = 0.0  # seconds after the last message until every one was counted (or the wait gave up)
     handoffs: int = 0  # claims of the good world declared or withdrawn during the fuzz (the bar: 0)
     ownership: dict[str, int] = field(default_factory=dict)  # the owners' shed/lost/taken_over increase
 
@@ -545,7 +546,9 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
                 d = delta()
                 return d if sum(d.get(c, 0) for c in COUNTERS) >= res.sent else None
 
+            s0 = time.perf_counter()
             d = _wait(settled, settle) or delta()
+            res.settle_seconds = round(time.perf_counter() - s0, 1)
             res.counters = {c: d.get(c, 0) for c in COUNTERS}
             res.rejected_kinds = {
                 k.split(".", 1)[1]: v for k, v in sorted(d.items()) if k.startswith("rejected.") and v
