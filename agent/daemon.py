@@ -883,8 +883,10 @@ class AgentDaemon:
         world if least loaded, and attach the worlds whose claim has settled."""
         now = time.monotonic()
         view = self.book.view()
+        me = self.owner_id
         for w in view.worlds:
-            if view.claimants(w) - {self.owner_id} or w in self._claims:
+            c = view.claims.get(w)
+            if w in self._claims or (c is not None and (len(c) > 1 or me not in c)):  # claimed by another
                 self.book.unclaimed_since.pop(w, None)
             else:
                 self.book.unclaimed_since.setdefault(w, now)
