@@ -404,7 +404,14 @@ def _wait(pred: Callable[[], Any], timeout: float, every: float = 0.25) -> Any:
 # the run ------------------------------------------------------------------------------------------------
 
 
-def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0, converge: float = 120.0) -> Result:
+def run(
+    messages: int,
+    seed: int = 0,
+    rate: float = 1000.0,
+    settle: float = 60.0,
+    converge: float = 120.0,
+    workers: int | None = None,
+) -> Result:
     """Fuzz an agent with `messages` hostile messages at `rate` per second beside a good gridworld.
 
     Parameters
@@ -419,6 +426,8 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
         Seconds to wait, after the last message, for the counters to reach `sent`.
     converge : float
         Seconds to wait, after that, for the good world's embedding error to drop under 0.05.
+    workers : int or None
+        The agent's `--workers` (None: its default, the number of cores).
 
     Returns
     -------
@@ -427,7 +436,7 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
     """
     ep = f"tcp/127.0.0.1:{free_port()}"
     res = Result()
-    agent = _start("agent", "--listen", ep, "-q")
+    agent = _start("agent", "--listen", ep, "-q", *(() if workers is None else ("--workers", str(workers))))
     agent_log = _Tail(agent.stderr)
     world = _start("world", "gridworld", "--id", GOOD, "--connect", ep, "-q")
     _Tail(world.stderr)
