@@ -488,14 +488,18 @@ class AgentDaemon:
 
     # attach / pause ----------------------------------------------------------------------------
     def _fetch(self, key: str, cls: type, tries: int = 3) -> Any:
+        """The first reply to a query on `key` decoded as `cls` (None: no reply in `tries` tries).
+        A reply that does not decode raises at once (asking again gets the same bytes); no reply or
+        an error reply (a timeout on one of two routes) is asked again."""
         last: Exception | None = None
         for _ in range(tries):
             try:
                 replies = self.bus.get(key, timeout=1.0)
+            except BusError as e:
+                last = e
+            else:
                 if replies:
                     return codec.decode(cls, replies[0].payload)
-            except (BusError, ProtocolError) as e:
-                last = e
             if self._stop.is_set():
                 break
         if last is not None:
@@ -1142,19 +1146,20 @@ class AgentDaemon:
         threading.Thread(target=_import_programs, name="import-programs", daemon=True).start()
 
     TICK = 0.1  # seconds between two ownership ticks when no world appeared or vanished
-    MIN_TICK = 0.02  # and when some did: however many, at most one tick per MIN_TICK (each tick is O(worlds))
+    MIN_TICK = 0.02  # when some did or the last tick claimed one: at most one per MIN_TICK (a tick is O(worlds))
 
     def run(self, seconds: float | None = None) -> None:
         """Process attach/detach until stop() or `seconds` elapse."""
         t0 = time.monotonic()
         last_ckpt = last_sweep = last_share = t0
         last_tick = float("-inf")
+        busy = False  # the last tick claimed a world (more may wait: the next tick comes at MIN_TICK)
         sweep_every = min(1.0, self.link_ttl / 2) if self.link_ttl is not None else None
         while not self._stop.is_set():
             if seconds is not None and time.monotonic() - t0 >= seconds:
                 break
             try:
-                changes = [self._changes.get(timeout=self.TICK)]
+                changes = [self._changes.get(timeout=self.MIN_TICK if busy else self.TICK)]
             except queue.Empty:
                 changes = []
             while True:  # every change queued so far, then one tick for all of them
@@ -1165,12 +1170,14 @@ class AgentDaemon:
             for wid, alive in changes:
                 if not alive:
                     self._detach(wid)
-            if time.monotonic() - last_tick < (self.MIN_TICK if changes else self.TICK):
+            if time.monotonic() - last_tick < (self.MIN_TICK if changes or busy else self.TICK):
                 continue  # a burst of worlds appearing or vanishing is one tick, not one each
             last_tick = time.monotonic()
             try:
                 self._handle_lost()
+                claims = self.counters["claimed"]
                 self.own()
+                busy = self.counters["claimed"] > claims  # one claim per tick: the next one soon
                 self.share_new_versions()
             except Exception:  # noqa: BLE001 - one bad tick must not stop the daemon
                 if self.bus.closed:
