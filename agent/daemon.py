@@ -985,6 +985,16 @@ class AgentDaemon:
             log.info("world %s is driven by an outside controller (program %r): not attached", wid, spec.program)
             self.event(wid, EventKind.ATTACH_FAILED, "the world is driven by an outside controller", "external")
             return
+        fresh: Any = None
+        known = self.links.get(wid)
+        if known is None or not same_body(known.spec, spec):
+            # the program first: a world no program fits (a broken or fake one) fails here, before a
+            # lease, truth or checkpoint query is sent for it (building one costs < 0.1 s once imported)
+            try:
+                fresh = make_program(spec, self.seed, **self.program_params.get(program_name(spec), {}))
+            except Exception as e:  # noqa: BLE001 - SpecMismatch, KeyError, MemoryError (a huge state space), ...
+                self._attach_failed(wid, "no_program", e)
+                return
         lease = self._take_lease(wid)
         if lease is None:
             return  # held by another live owner: the claim stays, own() asks again
@@ -1020,6 +1030,8 @@ class AgentDaemon:
                 previous=previous,
                 restored=restored,
                 last_published=last,
+                program=fresh,
+                detector=None if fresh is None else make_detector(self.detector, **fresh.detector_params),
             )
         except Exception as e:  # noqa: BLE001 - no program fits this spec (KeyError, MemoryError, ...); the daemon goes on
             self.leases.release(wid, epoch)
