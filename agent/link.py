@@ -310,6 +310,8 @@ class WorldLink:
             c.episodes += 1
         c.reward_mean += self.REWARD_EMA * (obs.reward - c.reward_mean)
         detector = self.detector
+        if detector is not None and self.program.take_rebase():
+            detector.reset()
         perf = self.program.performance(obs) if detector is not None else None
         if detector is not None and perf is not None:
             ref = detector.reference

@@ -107,3 +107,39 @@ def test_the_readme_is_short_and_keeps_the_two_commands():
     ci = (ROOT / ".ci" / "run").read_text()
     test_cmd = "python3.11 -m venv .venv && .venv/bin/pip install -e '.[test]' && .venv/bin/python -m pytest"
     assert test_cmd in text and test_cmd in ci
+
+
+def test_a_changed_number_in_a_generated_block_is_drift(tmp_path):
+    from sensorimotor.tools.results_doc import main, render
+
+    page = tmp_path / "page.md"
+    block = render("objectpose")
+    page.write_text(f"<!-- BEGIN results: objectpose -->\n{block}\n<!-- END results: objectpose -->\n")
+    assert main(["--check", str(page)]) == 0
+    assert "0.0092" in block  # the sensorimotor embedding's error after 10 embeddings, from results.json
+    page.write_text(page.read_text().replace("0.0092", "0.0091", 1))
+    assert main(["--check", str(page)]) == 1
+    assert main([str(page)]) == 0 and "0.0092" in page.read_text()  # regenerated from the file
+
+
+#: what may carry a decimal outside a generated block: figure, table, chapter and equation numbers
+_LABEL = re.compile(r"(Figs?|Table|Chapter|ch\.|section|Eq|chapter) \d+(\.\d+)*(-\d+(\.\d+)*)?")
+
+
+def numbers_outside_blocks(text: str) -> list[str]:
+    """Measured-looking numbers (decimals, durations in seconds) outside generated blocks, inline
+    code, images and headings: a page's figures must come from its blocks."""
+    text = re.sub(r"<!-- BEGIN results: ([\w.-]+) -->.*?<!-- END results: \1 -->", "", text, flags=re.S)
+    text = "\n".join(ln for ln in text.splitlines() if not ln.startswith(("#", "![")))
+    text = _LABEL.sub("", re.sub(r"`[^`]*`", "", text))
+    return re.findall(r"\d+\.\d+|\d[\d,]* s\b", text)
+
+
+def test_results_page_has_no_number_outside_its_generated_blocks():
+    assert (
+        numbers_outside_blocks("Fig 5.4 (`--steps 1.5`)\n<!-- BEGIN results: a -->\n0.5 ± 1\n<!-- END results: a -->")
+        == []
+    )
+    assert numbers_outside_blocks("the error fell to 0.01 in 485 s") == ["0.01", "485 s"]
+    for page in ("docs/results.md",):
+        assert numbers_outside_blocks((ROOT / page).read_text()) == [], page

@@ -20,6 +20,7 @@ SMALL = {
     "sme/Vergence-v0": {"n_starts": 3, "fovea": 8},
     "sme/MountainCar-v0": {"n_positions": 3, "n_eval": 0, "fovea": 8, "cache_size": 100},
     "sme/ObjectPose-v0": {"half_range": 1, "image": 32, "goal": "0,0"},
+    "sme/Arm-v0": {"lattice": 3, "image": 24, "goal_image": 48},
 }
 
 

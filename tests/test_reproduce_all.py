@@ -65,7 +65,12 @@ def test_reproduce_all_writes_one_report_with_a_verdict_per_row(tiny_report, cap
     assert "![gridworld_lspi.png](gridworld/gridworld_lspi.png)" in md
     assert "trustworthiness / continuity / D_metric / D_topo" in md  # the chapter's full table is in
     with open(out / "gridworld" / "results.json") as f:
-        assert len(json.load(f)["results"]) == 6  # 2 runs x (plain, barrier, random)
+        grid = json.load(f)
+    assert len(grid["results"]) == 6  # 2 runs x (plain, barrier, random)
+    with open(out / "run.json") as f:
+        run = json.load(f)["chapters"]["gridworld"]
+    # the chapter's CPU time (one worker: this process's own) is kept beside its wall time
+    assert 0 < run["cpu_seconds"] == grid["cpu_seconds"] and run["cpu_seconds"] <= 2 * run["seconds"] + 1
     page = (out / "report.html").read_text()
     assert "data:image/png;base64," in page and "src='gridworld/" not in page  # self-contained
     assert "<td class='met'>met</td>" in page

@@ -40,7 +40,7 @@ def test_lesion_robust_rule_ends_above_basic_rule():
             detector=None,
             supersample=1,
             exploration="gaussian",
-            every=250,
+            every=500,  # greedy evaluations at 0, 500, ..., 2500: three after the lesion
             embed_every=10**9,
         )
         assert r.world.lesion.sum() > 50

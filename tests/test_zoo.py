@@ -199,3 +199,48 @@ def test_bench_zoo_quick_reports_every_figure(capsys):
     r = run_one(next(z for z in ZOO if z.label == "CliffWalking"), 0, 8_000)
     assert r["goal"] == "terminated" and r["final_error"] < 0.1 and r["goal_reached_fraction"] == 1.0
     assert r["trustworthiness"] > 0.9 and r["pca_error"] is not None and r["regressions"] == 0 and r["drops"] == 0
+    assert r["worst_ratio"] is not None and r["worst_ratio"] <= 1.5
+
+
+@pytest.mark.skipif(importlib.util.find_spec("minigrid") is None, reason="minigrid is not installed")
+def test_minigrid_turns_are_found_and_its_map_no_longer_folds():
+    from sensorimotor.protocol.messages import EventKind
+
+    with make_world("gym:MiniGrid-Empty-8x8-v0", None, 0) as w:
+        program = make_program(w.spec(), 0)
+        run = run_inprocess(w, program, 12_000)
+    said = [e for e in run.events(EventKind.POLICY_ITERATION) if e.reason == "rotations"]
+    assert said and "4 make a full turn" in said[0].detail
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert embs[-1].metrics["rotation_order"] == 4.0 and embs[-1].metrics["goal_reached_fraction"] == 1.0
+    assert embs[-1].procrustes_error < 0.03, [e.procrustes_error for e in embs]  # 0.25 as the traces were
+
+
+def test_a_world_whose_sampled_traces_never_differ_goes_back_to_one_trace_per_start():
+    from sensorimotor.agent.detectors import make_detector
+    from sensorimotor.protocol.messages import EventKind
+
+    with make_world("gym:CliffWalking-v1", None, 0) as w:
+        program = make_program(w.spec(), 0)
+        detector = make_detector("cusum", **program.detector_params)
+
+        def alike(step: int, obs: object) -> None:  # as when distinct states look alike (MountainCar's floats)
+            if step == 4_000:
+                program.stochastic = True
+
+        run = run_inprocess(w, program, 10_000, detector=detector, on_step=alike)
+    said = [e for e in run.events(EventKind.POLICY_ITERATION) if e.reason == "deterministic"]
+    assert said and not program.stochastic
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert all(e.metrics["samples_per_start"] == 1.0 for e in embs) and embs[-1].procrustes_error < 0.1
+    assert not run.events(EventKind.DROP_DETECTED)
+
+
+def test_slippery_frozenlake_is_embedded_from_mean_traces_of_a_long_horizon_policy():
+    with make_world("gym:FrozenLake-v1", None, 2) as w:
+        program = make_program(w.spec(), 2, estimator="mean_trace", samples=64)
+        run = run_inprocess(w, program, 40_000, stop_when=lambda r: bool(r.embeddings))
+    assert program.stochastic and program.lspi.gamma == 0.99 and abs(program.lspi.tie_tolerance - 0.005) < 1e-3
+    e = run.embeddings[0]
+    assert e.metrics["stochastic"] == 1.0 and e.metrics["samples_per_start"] == 64.0
+    assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: 0.71 (docs/zoo.md)

@@ -23,13 +23,14 @@ from sensorimotor.tools.common import parse_params
 
 KINDS = {
     "lesion": "retina: fields within --param radius=R px of (u, v) px read 0 (default a small off-centre part "
-    "of the fovea: u=6 v=0 radius=6)",
-    "reverse": "retina: swap up/down motor commands (again to restore)",
+    "of the fovea: u=6 v=0 radius=6); arm: --param joint=NAME locked (where it is, or at=RAD)",
+    "reverse": "retina: swap up/down motor commands (again to restore); arm: flip --param joint=NAME's sign",
     "noise": "retina: additive sensor noise, --param sd=0.05",
     "heal": "undo every perturbation",
-    "gain": "rovingeye: every move becomes --param gain=G times longer (default 1.5; a different eye muscle)",
+    "gain": "rovingeye: every move becomes --param gain=G times longer (default 1.5; a different eye muscle); "
+    "arm: --param joint=NAME gain=G scales that joint's step",
     "morph": "mountain car/vergence: change the body, e.g. --baseline 1.4 or --vertical (same as --param "
-    "baseline=1.4, --param vertical=true)",
+    "baseline=1.4, --param vertical=true); arm: --param link=NAME scale=1.3 lengthens a link",
 }
 
 

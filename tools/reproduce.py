@@ -9,7 +9,9 @@ and a baseline change while driving), `objectpose` (ch. 6: the generic program's
 object pose against PCA and Isomap, Fig 6.3, and the alignment task of Fig 6.4), `rovingeye` (ch. 5.2:
 Table 5.1, the five ways of making traces, Fig 5.8 scree and Fig 5.11 embeddings) and `chapter9`
 (beyond the dissertation: probabilistic embedding in a slippery gridworld, option discovery,
-mountain-car policy maps, Isomap and state-aided vergence traces). Runs go to worker processes
+mountain-car policy maps, Isomap and state-aided vergence traces); and `arm` (beyond the
+dissertation: robot arms from URDFs against PCA and Isomap, and the body changes the agent notices
+by itself). Runs go to worker processes
 (spawned); results are written to
 OUT/CHAPTER/results.json, table.md and PNG plots.
 """
@@ -142,6 +144,12 @@ def job_reversal(seed: int, at: int, steps: int, supersample: int) -> dict:
     }
 
 
+def job_retina(kind: str, *args: Any) -> dict:
+    """One retina job of `sme reproduce retina` by name (one pool runs all three experiments)."""
+    jobs: dict[str, Callable[..., dict]] = {"learning": job_learning, "lesion": job_lesion, "reversal": job_reversal}
+    return jobs[kind](*args)
+
+
 def job_vergence(seed: int, world: str, iterations: int) -> dict:
     import numpy as np
 
@@ -248,7 +256,9 @@ def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
     if workers <= 1:
         return [fn(*j) for j in jobs]
     with mp.get_context("spawn").Pool(workers) as pool:
-        return pool.starmap(fn, jobs)
+        # one job at a time (chunksize 1): starmap's default hands each worker chunks of several
+        # jobs, and a chunk of long ones left one core idle at the end of a chapter
+        return pool.starmap(fn, jobs, chunksize=1)
 
 
 # --- chapters ------------------------------------------------------------------------------------
@@ -313,20 +323,19 @@ def gridworld(runs: int, quick: bool, workers: int, out: str) -> dict:
 
 
 def retina(runs: int, quick: bool, workers: int, out: str, supersample: int = 2) -> dict:
-    L = dict(steps=1500, every=250) if quick else dict(steps=5000, every=100)
+    L = dict(steps=1500, every=500) if quick else dict(steps=5000, every=100)
     les = dict(at=1000, steps=2500, every=250) if quick else dict(at=2000, steps=6000, every=250)
     rev = dict(at=2000, steps=4500) if quick else dict(at=4000, steps=8000)
-    learning = _pool_map(job_learning, [(s, L["steps"], L["every"], supersample) for s in range(runs)], workers)
-    lesion = _pool_map(
-        job_lesion,
-        [
-            (s, rule, les["at"], les["steps"], les["every"], supersample)
-            for rule in ("basic", "robust")
-            for s in range(runs)
-        ],
-        workers,
-    )
-    reversal = _pool_map(job_reversal, [(s, rev["at"], rev["steps"], supersample) for s in range(runs)], workers)
+    # one pool for the three experiments, the longest jobs first, so that both cores stay busy
+    jobs: list[tuple[Any, ...]] = [("reversal", s, rev["at"], rev["steps"], supersample) for s in range(runs)]
+    jobs += [
+        ("lesion", s, rule, les["at"], les["steps"], les["every"], supersample)
+        for rule in ("basic", "robust")
+        for s in range(runs)
+    ]
+    jobs += [("learning", s, L["steps"], L["every"], supersample) for s in range(runs)]
+    done = _pool_map(job_retina, jobs, workers)
+    reversal, lesion, learning = done[:runs], done[runs : 3 * runs], done[3 * runs :]
 
     one = _mean_se([r["one"][-1] for r in learning])
     two = _mean_se([r["two"][-1] for r in learning])
@@ -488,11 +497,15 @@ def _ci95(x: list[float]) -> tuple[float, float]:
 
 
 def mountaincar(runs: int, quick: bool, workers: int, out: str) -> dict:
-    train, every, n_eval = (30_000, 10_000, 20) if quick else (100_000, 10_000, 100)
+    # --quick: 20,000 training car steps and one evaluation at the end (the full run evaluates every
+    # 10,000 and scores the last three); one live body change, evaluated every 10,000 around it
+    train, every, n_eval = (20_000, 20_000, 20) if quick else (100_000, 10_000, 100)
+    live_every, n_live = (10_000, 1) if quick else (every, max(1, runs // 2))
     morph_at = train
     kinds = ("baseline-1.0", "baseline-1.4", "vertical", "true")
-    jobs: list[tuple[Any, ...]] = [(k, s, train, every, n_eval) for k in kinds for s in range(runs)]
-    jobs += [("live", s, 2 * train, every, n_eval, morph_at) for s in range(max(1, runs // 2))]
+    # the longest jobs first (the live run drives twice as long), so that both cores stay busy
+    jobs: list[tuple[Any, ...]] = [("live", s, 2 * train, live_every, n_eval, morph_at) for s in range(n_live)]
+    jobs += [(k, s, train, every, n_eval) for k in kinds for s in range(runs)]
     jobs += [("random", s, train, every, n_eval) for s in range(runs)]
     res = _pool_map(job_mountaincar, jobs, workers)
 
@@ -629,7 +642,14 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
     return run(runs, quick, workers, out)
 
 
+def arm(runs: int, quick: bool, workers: int, out: str) -> dict:
+    from sensorimotor.tools.experiments.arm import chapter
+
+    return chapter(runs, quick, workers, out)
+
+
 CHAPTERS = {
+    "arm": arm,
     "gridworld": gridworld,
     "retina": retina,
     "vergence": vergence,
@@ -663,7 +683,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reproduce",
         help="rerun a dissertation experiment (gridworld, retina, vergence, mountaincar, objectpose, rovingeye, "
-        "chapter9), or all of them into one report",
+        "chapter9), or all of them into one report; `arm`: robot arms from URDFs and their body changes",
         description=__doc__
         + "\n`all` runs every chapter (retina, retina-natural, gridworld, rovingeye, objectpose, vergence, mountaincar, "
         "chapter9) and writes OUT/report.md and OUT/report.html: each claim of the dissertation beside ours with a "
@@ -707,14 +727,24 @@ def _run_chapter(
     """Run one chapter into OUT/NAME (results.json, table.md, plots); return its result, folder and seconds."""
     out = os.path.join(args.out, name)
     os.makedirs(out, exist_ok=True)
-    t0 = time.time()
+    t0, cpu0 = time.time(), cpu_seconds()
     with use_cluster(getattr(args, "cluster", None)):
         res = fn(args.runs, args.quick, args.workers, out)
+    res.setdefault("cpu_seconds", cpu_seconds() - cpu0)
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(res, f, default=float)
     with open(os.path.join(out, "table.md"), "w") as f:
         f.write(res["markdown"] + "\n")
     return res, out, time.time() - t0
+
+
+def cpu_seconds() -> float:
+    """CPU time (user + system) of this process and of its finished worker processes: a chapter's
+    cost apart from how busy the machine is (its wall time on idle cores is about this / workers)."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def _where(args: argparse.Namespace) -> str:
@@ -841,13 +871,16 @@ def main_all(args: argparse.Namespace) -> int:
             )
             continue
         chapters.append(_chapter_report(name, res, out, seconds, args.quick))
-        meta["chapters"][name] = {"seconds": seconds, "error": None}
+        meta["chapters"][name] = {"seconds": seconds, "cpu_seconds": res.get("cpu_seconds"), "error": None}
         save_meta()
         rows = chapters[-1].rows
         verdicts = ", ".join(
             f"{sum(r.verdict == v for r in rows)} {v}" for v in (report.MET, report.NOT_MET, report.NOT_COMPARABLE)
         )
-        print(f"[{i}/{len(names)}] {name} done in {seconds:.0f} s: {verdicts}", flush=True)
+        print(
+            f"[{i}/{len(names)}] {name} done in {seconds:.0f} s ({res['cpu_seconds']:.0f} s of CPU): {verdicts}",
+            flush=True,
+        )
     total = time.time() - t_all
     meta["total"] = total
     save_meta()

@@ -1,8 +1,9 @@
 """The documentation's result tables and sample outputs, generated from the files of the commands
 they cite, so that no number in them is typed by hand.
 
-Each source is a command and the file it wrote, kept under docs/results/NAME/ (`results.json` of
-`sme reproduce CHAPTER ... --out DIR`, or the stdout of `sme demo`). A page holds a block between
+Each source is a command and the file it wrote, kept under docs/ (docs/results/NAME/: `results.json`
+of `sme reproduce CHAPTER ... --out DIR`, the stdout of `sme demo` or of a bench's `--json`;
+docs/reproduce/report-quick/: the folder of `sme reproduce all --quick`). A page holds a block between
 ``<!-- BEGIN results: NAME -->`` and ``<!-- END results: NAME -->``;
 `python -m sensorimotor.tools.results_doc PAGE...` rewrites every block from its source and
 `--check` exits 1 when a page has drifted (tests/test_results_doc.py runs the check). To refresh a
@@ -20,9 +21,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "docs" / "results"
+DOCS = ROOT / "docs"
 BLOCK = re.compile(r"(<!-- BEGIN results: ([\w.-]+) -->\n)(.*?)(<!-- END results: \2 -->)", re.S)
-PAGES = ("README.md", "docs/getting-started.md", "docs/results.md")
+PAGES = (
+    "README.md",
+    "docs/getting-started.md",
+    "docs/results.md",
+    "docs/reproduce.md",
+    "docs/commands/bench.md",
+    "docs/arm.md",
+)
 
 
 @dataclass(frozen=True)
@@ -30,14 +38,14 @@ class Source:
     """A command and the file it wrote, rendered into a block of markdown."""
 
     command: str
-    file: str  # relative to docs/results/
+    file: str  # relative to docs/
     render: Callable[[Source, str], str]
 
 
 def reproduce_table(src: Source, text: str) -> str:
     """The table `sme reproduce` wrote (its results.json's ``markdown``), with the command and file."""
     data = json.loads(text)
-    return f"{data['markdown'].strip()}\n\nFrom `{src.command}` (its `results.json`: `docs/results/{src.file}`)."
+    return f"{data['markdown'].strip()}\n\nFrom `{src.command}` (its `results.json`: `docs/{src.file}`)."
 
 
 def demo_output(src: Source, text: str) -> str:
@@ -49,23 +57,187 @@ def demo_output(src: Source, text: str) -> str:
     return "```text\n$ " + src.command + "\n" + "\n".join(shown + [""] + lines[cut:]) + "\n```"
 
 
+def command_output(src: Source, text: str) -> str:
+    """A command's stdout, whole, under the command."""
+    return "```text\n$ " + src.command + "\n" + text.rstrip("\n") + "\n```"
+
+
+def _cell(v: object) -> str:
+    if isinstance(v, float):
+        return f"{v:,.4g}" if abs(v) < 1000 else f"{v:,.0f}"
+    return "" if v is None else str(v)
+
+
+def jsonl_table(
+    columns: tuple[tuple[str, str], ...], keep: Callable[[dict], bool] = lambda r: True
+) -> Callable[[Source, str], str]:
+    """A renderer for a command's JSON lines (a bench's ``--json``): one table row per kept line,
+    one column per (header, key)."""
+
+    def render_jsonl(src: Source, text: str) -> str:
+        rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
+        lines = ["| " + " | ".join(h for h, _ in columns) + " |", "|" + "---|" * len(columns)]
+        lines += ["| " + " | ".join(_cell(r.get(k)) for _, k in columns) + " |" for r in rows if keep(r)]
+        return "\n".join(lines) + f"\n\nFrom `{src.command}` (its output: `docs/{src.file}`)."
+
+    return render_jsonl
+
+
+def markdown_file(src: Source, text: str) -> str:
+    """A markdown file the command wrote itself (its ``--out FILE.md``), as it is."""
+    return f"{text.strip()}\n\n(`docs/{src.file}`, as `{src.command}` wrote it.)"
+
+
+def report_summary(src: Source, text: str) -> str:
+    """Per chapter of a `sme reproduce all` folder: wall time and the verdicts of its rows, judged
+    again from the chapter's results.json by the report's own rules (tools/report.py)."""
+    from sensorimotor.tools import report
+
+    meta = json.loads(text)
+    folder = (DOCS / src.file).parent
+    quick = "--quick" in src.command
+    lines = ["| chapter | wall time | CPU time | met | not met | not comparable |", "|---|---|---|---|---|---|"]
+
+    def cpu(info: dict) -> str:
+        c = info.get("cpu_seconds")
+        return "not recorded" if c is None else f"{c:.0f} s"
+
+    totals = dict.fromkeys((report.MET, report.NOT_MET, report.NOT_COMPARABLE), 0)
+    for name, info in meta["chapters"].items():
+        if info.get("error"):
+            lines.append(f"| {name} | {info['seconds']:.0f} s | {cpu(info)} | failed | | |")
+            continue
+        rows = report.chapter_rows(name, json.loads((folder / name / "results.json").read_text()), quick)
+        n = {v: sum(r.verdict == v for r in rows) for v in totals}
+        totals = {v: totals[v] + n[v] for v in totals}
+        lines.append(
+            f"| {name} | {info['seconds']:.0f} s | {cpu(info)} | {n[report.MET]} | {n[report.NOT_MET]} "
+            f"| {n[report.NOT_COMPARABLE]} |"
+        )
+    total = meta.get("total")
+    cpus = [c.get("cpu_seconds") for c in meta["chapters"].values()]
+    cpu_all = "not recorded" if None in cpus else f"{sum(cpus):.0f} s"
+    lines.append(
+        f"| all | {'unknown' if total is None else f'{total:.0f} s ({total / 60:.1f} min)'} | {cpu_all} | {totals[report.MET]} "
+        f"| {totals[report.NOT_MET]} | {totals[report.NOT_COMPARABLE]} |"
+    )
+    rel = folder.relative_to(DOCS)
+    out = (
+        "\n".join(lines)
+        + f"\n\nFrom `{src.command}` (its `run.json` and each chapter's `results.json`: `docs/{rel}/`)."
+    )
+    load = folder / "load.log"  # `date +%T` and /proc/loadavg, sampled every minute while it ran
+    if load.exists():
+        one = [float(ln.split()[1]) for ln in load.read_text().splitlines() if ln.strip()]
+        out += (
+            f" The machine's 1-minute load average while it ran: {min(one):.1f} to {max(one):.1f} "
+            f"(median {sorted(one)[len(one) // 2]:.1f}; {len(one)} samples of `/proc/loadavg`, `docs/{rel}/load.log`)."
+        )
+    return out
+
+
+def runs10_estimate(src: Source, text: str) -> str:
+    """From a `sme reproduce all --quick --runs 1` folder: each chapter's CPU time, and that times
+    ten over two cores, the arithmetic estimate of the chapter's wall time at ``--runs 10`` on two
+    idle cores (an upper bound for the chapters whose jobs do not all grow with the runs: the one
+    live mountain-car run, chapter 9's state-aided vergence)."""
+    meta = json.loads(text)
+    lines = [
+        "| chapter | CPU time at `--runs 1` | x 10 runs / 2 cores |",
+        "|---|---|---|",
+    ]
+    total = 0.0
+    for name, info in meta["chapters"].items():
+        c = info.get("cpu_seconds")
+        if c is None:
+            lines.append(f"| {name} | {'failed' if info.get('error') else 'not recorded'} | |")
+            continue
+        total += c
+        lines.append(f"| {name} | {c:.0f} s | {c * 10 / 2 / 60:.1f} min |")
+    lines.append(f"| all | {total:.0f} s | {total * 10 / 2 / 60:.1f} min |")
+    rel = (DOCS / src.file).parent.relative_to(DOCS)
+    return "\n".join(lines) + f"\n\nFrom `{src.command}` (its `run.json`: `docs/{rel}/run.json`)."
+
+
+def lesion_sweep_table(src: Source, text: str) -> str:
+    """The lesion sweep's table (its JSON's ``markdown``), with the command and file."""
+    data = json.loads(text)
+    return f"{data['markdown'].strip()}\n\nFrom `{data['command']} --out ...` (its JSON: `docs/{src.file}`)."
+
+
+def objectpose_isomap(src: Source, text: str) -> str:
+    """Isomap's Procrustes error per neighbourhood size, and the generic program's per embedding
+    (seed 0): the caveat under the object-pose table."""
+    r = json.loads(text)["results"][0]
+    iso = ", ".join(f"{k} neighbours {v:.3f}" for k, v in r["isomap_errors"].items())
+    errs = ", ".join(f"{e:.4f}" for e in r["errors"])
+    return (
+        f"Seed {r['seed']}: Isomap {iso}; the generic program's embeddings in turn {errs}.\n\n"
+        f"From `{src.command}` (its `results.json`: `docs/{src.file}`)."
+    )
+
+
 SOURCES: dict[str, Source] = {
-    "demo": Source("sme demo --steps 12000 --seconds 120", "demo/output.txt", demo_output),
+    "demo": Source("sme demo --steps 12000 --seconds 120", "results/demo/output.txt", demo_output),
     "gridworld-quick": Source(
-        "sme reproduce gridworld --runs 3 --quick", "gridworld-quick/results.json", reproduce_table
+        "sme reproduce gridworld --runs 3 --quick", "results/gridworld-quick/results.json", reproduce_table
     ),
-    "gridworld": Source("sme reproduce gridworld --runs 3", "gridworld/results.json", reproduce_table),
-    "vergence-quick": Source("sme reproduce vergence --runs 2 --quick", "vergence-quick/results.json", reproduce_table),
-    "chapter9-quick": Source("sme reproduce chapter9 --quick", "chapter9-quick/results.json", reproduce_table),
-    "objectpose": Source("sme reproduce objectpose --runs 5", "objectpose/results.json", reproduce_table),
-    "rovingeye": Source("sme reproduce rovingeye --runs 5", "rovingeye/results.json", reproduce_table),
+    "gridworld": Source("sme reproduce gridworld --runs 3", "results/gridworld/results.json", reproduce_table),
+    "vergence-quick": Source(
+        "sme reproduce vergence --runs 2 --quick", "results/vergence-quick/results.json", reproduce_table
+    ),
+    "chapter9-quick": Source("sme reproduce chapter9 --quick", "results/chapter9-quick/results.json", reproduce_table),
+    "objectpose": Source("sme reproduce objectpose --runs 5", "results/objectpose/results.json", reproduce_table),
+    "rovingeye": Source("sme reproduce rovingeye --runs 5", "results/rovingeye/results.json", reproduce_table),
+    "objectpose-isomap": Source(
+        "sme reproduce objectpose --runs 5", "results/objectpose/results.json", objectpose_isomap
+    ),
+    "lesion-sweep": Source("", "results/lesion-sweep/lesion_sweep.json", lesion_sweep_table),
+    "arm": Source("sme reproduce arm --runs 5", "results/arm/results.json", reproduce_table),
+    "bench-world-arm": Source("sme bench world --world arm", "results/bench-world-arm/output.txt", command_output),
 }
+SOURCES["detectors-quick"] = Source(
+    "sme bench detectors --worlds gridworld,retina,vergence,mountaincar --quick --out FILE.md",
+    "reproduce/detectors-quick.md",
+    markdown_file,
+)
+SOURCES["bench-detectors"] = Source(
+    "sme bench detectors --retina-seeds 0 --worlds none --json",
+    "results/bench-detectors/output.jsonl",
+    jsonl_table(
+        (
+            ("detector", "detector"),
+            ("median delay (steps)", "median_delay"),
+            ("missed (of the seeds)", "missed"),
+            ("seeds", "seeds"),
+            ("false alarms / 10k", "false_alarms_per_10k"),
+        ),
+        lambda r: r.get("streams") == "synthetic",
+    ),
+)
+#: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
+QUICK_ALL = "sme reproduce all --quick --runs 10"
+SOURCES["report-quick"] = Source(QUICK_ALL, "reproduce/report-quick/run.json", report_summary)
+SOURCES["report-quick-runs1"] = Source(
+    "nice -n 10 sme reproduce all --quick --runs 1 --workers 2", "reproduce/report-quick-runs1/run.json", report_summary
+)
+SOURCES["runs1-estimate"] = Source(
+    "nice -n 10 sme reproduce all --quick --runs 1 --workers 2",
+    "reproduce/report-quick-runs1/run.json",
+    runs10_estimate,
+)
+for _chapter, _block in (
+    ("retina", "retina-quick"),
+    ("retina-natural", "retina-natural-quick"),
+    ("gridworld", "gridworld-all-quick"),
+):
+    SOURCES[_block] = Source(QUICK_ALL, f"reproduce/report-quick/{_chapter}/results.json", reproduce_table)
 
 
 def render(name: str) -> str:
     """The markdown of block `name` from its stored file."""
     src = SOURCES[name]
-    return src.render(src, (RESULTS / src.file).read_text())
+    return src.render(src, (DOCS / src.file).read_text())
 
 
 def rewrite(text: str) -> str:

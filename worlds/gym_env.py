@@ -37,6 +37,7 @@ GYM_ENVS: dict[str, tuple[str, dict[str, Any]]] = {
     "sme/MountainCar-v0": ("mountaincar", {}),
     "sme/RovingEye-v0": ("rovingeye", {}),
     "sme/ObjectPose-v0": ("objectpose", {}),
+    "sme/Arm-v0": ("arm", {}),
 }
 
 

@@ -83,8 +83,8 @@ class GymWorldParams:
     hand_velocity: bool = option(False, "panda-gym: serve the hand's velocity too, beside its position")
     headings: int = option(
         1,
-        "MiniGrid: start headings per cell (1: every start faces east; 4: all four - turning first "
-        "then mirrors the traces across the diagonal, and the map folds)",
+        "MiniGrid: start headings per cell (1: every start faces east; 4: all four - each start's "
+        "traces are then in the frame of its own heading, and one cell's four do not agree: see docs/zoo.md)",
         choices=(1, 4),
     )
 

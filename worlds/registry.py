@@ -78,6 +78,7 @@ WORLDS: dict[str, WorldKind] = {
     "objectpose": WorldKind(
         "objectpose", "ObjectPoseWorld", "ObjectPoseWorldParams", "a textured box turned in pitch and yaw (ch. 6)"
     ),
+    "arm": WorldKind("arm", "ArmWorld", "ArmWorldParams", "a robot arm from any URDF, seen by a fixed camera"),
     "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }
 

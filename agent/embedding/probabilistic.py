@@ -6,7 +6,11 @@ The two estimators the text proposes:
 1. `mode_traces`: sample several traces per start state and keep the most frequent one (the mode)
    as the start's canonical trace; then embed as usual.
 2. `mean_pair_distances`: for each pair of start states, the mean distance over sampled pairs of
-   their traces. Its diagonal is the within-start spread, which the plain mean ignores (set to 0);
+   their traces.
+
+A third, a distance between the trace distributions themselves: `mean_trace_distances`, the padded
+sum (Eq 3.1) between the starts' mean traces (per step, the frequency of each action among the
+samples that reached the goal), over the first steps (the median length), before the traces mix. Its diagonal is the within-start spread, which the plain mean ignores (set to 0);
    `debias=True` also subtracts the average of the two starts' spreads from each pair (an
    estimate of the noise floor that an additive constant would otherwise add to every distance).
 
@@ -73,6 +77,46 @@ def mean_pair_distances(
         D = np.maximum(D - 0.5 * (spread[:, None] + spread[None, :]), 0.0)
     np.fill_diagonal(D, 0.0)
     return D
+
+
+def mean_traces(
+    samples: Sequence[Sequence[Sequence[int]]],
+    n_actions: int,
+    reached: Sequence[Sequence[bool]] | None = None,
+    horizon: int | None = None,
+) -> np.ndarray:
+    """Each start's *mean trace*: at every step t, the fraction of its samples whose action t was
+    each action (a sample that has ended contributes a zero action, as Eq 3.1 pads): [n, horizon,
+    n_actions]. With `reached`, only the samples that reached the goal count (all of a start's when
+    none did). `horizon` defaults to the median length of the samples counted."""
+    kept = []
+    for i, s in enumerate(samples):
+        ok = [list(t) for t, r in zip(s, reached[i], strict=True) if r] if reached is not None else []
+        kept.append(ok or [list(t) for t in s])
+    if not kept or any(len(s) == 0 for s in kept):
+        raise ValueError("every start state needs at least one sampled trace")
+    if horizon is None:
+        horizon = max(1, int(np.median([len(t) for s in kept for t in s])))
+    M = np.zeros((len(kept), horizon, n_actions))
+    for i, s in enumerate(kept):
+        for t in s:
+            a = np.asarray(t[:horizon], dtype=np.int64)
+            M[i, np.arange(a.size), a] += 1.0 / len(s)
+    return M
+
+
+def mean_trace_distances(
+    samples: Sequence[Sequence[Sequence[int]]],
+    n_actions: int,
+    reached: Sequence[Sequence[bool]] | None = None,
+    horizon: int | None = None,
+) -> np.ndarray:
+    """A distance between trace distributions: the padded sum (Eq 3.1) between the starts' mean
+    traces (`mean_traces`), sum_t ||m_i(t) - m_j(t)||_1 over the first `horizon` steps (default: the
+    median sample length - later steps are mostly the world's noise, once the traces have mixed)."""
+    M = mean_traces(samples, n_actions, reached, horizon)
+    flat = M.reshape(M.shape[0], -1)
+    return np.abs(flat[:, None, :] - flat[None, :, :]).sum(axis=2)
 
 
 ESTIMATORS = ("mode", "mean")

@@ -188,6 +188,16 @@ class Program(abc.ABC):
     def on_drop(self, step: int) -> None:
         """The detector saw a drop in `performance`: relearn as the learner prescribes."""
 
+    def rebase_performance(self) -> None:
+        """Say that `performance` is now measured another way (its scale changed, not the world):
+        the daemon's drop detector forgets its reference before the next value."""
+        self._rebase = True
+
+    def take_rebase(self) -> bool:
+        """Whether `rebase_performance` was called since the last call (the daemon asks each step)."""
+        out, self._rebase = getattr(self, "_rebase", False), False
+        return out
+
     def state(self) -> dict[str, Any]:
         """A snapshot of what the program learned and where it is (see the module docstring).
         Subclasses extend the base's dict; outputs not yet drained are not part of it."""

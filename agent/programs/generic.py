@@ -25,9 +25,16 @@ continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time w
 (`distance=dtw`, with a cost per repeated step so trace length stays in it). Discrete traces are
 compared with the edit distance.
 
+Egocentric actions: the tabular learner finds which actions are rotations (repeated, they come
+back to where they started) and compares traces in the frame of their start
+(`agent.embedding.rotation_frames`; `frames=off` to compare them as they are).
+
 A world whose transitions are seen to be stochastic (the same observation and action led to
 different observations) is embedded from `samples` traces per start state with the ch. 9.4
-estimators (`estimator`: the mode trace or the mean pairwise distance); the embedding says so.
+estimators (`estimator`: the mode trace or the mean pairwise distance) or the padded sum between
+mean traces (`mean_trace`); the embedding says so. The tabular learner there plans with discount
+`stochastic_gamma` over up to `stochastic_samples` samples. A sweep whose samples are one trace for
+every start takes the world back to one trace per start.
 
 Phases alternate: *learn* until `samples_per_iteration` new samples (LSPI: then features are
 refitted and LSPI iterates off the act path) or `embed_every` steps (Sarsa, which learns on every
@@ -35,8 +42,10 @@ step); *embed*: the greedy policy from each start state (`StartStateSweep`), tra
 classical MDS, Embedding vN. Once a sweep reaches the goal from `watch_after` of the starts the
 policy is *accepted*; after that a new policy is embedded only when its sweep is as good (as many
 goals, traces no longer), else the accepted policy is swept again - so embeddings hold once
-learned, and the drop detector sees only the accepted policy's trace scores (gamma^length at the
-goal, else 0), never the program's own experiments. On a drop the samples and policy are dropped,
+learned, and the drop detector sees only the accepted policy's trace scores, never the program's
+own experiments: in a deterministic world each relative to the accepted policy's own trace from
+that start (1 while it does what it did, gamma per extra step, 0 for a goal no longer reached), in
+a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are dropped,
 the policy relearned from fresh experience and the next embedding says `relearned`.
 """
 
@@ -50,7 +59,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
-from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mode_trace
+from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
+from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
@@ -118,7 +128,27 @@ class GenericProgramParams:
     )
     samples: int = option(8, "traces per start state once the world is seen to be stochastic", min=2, max=100)
     estimator: str = option(
-        "mode", "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4)", choices=("mode", "mean")
+        "mode",
+        "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4), mean_trace (the padded sum "
+        "between the starts' mean traces, a distance between trace distributions), or plain (one trace "
+        "per start, as in a deterministic world: the figure the estimators are compared with)",
+        choices=("mode", "mean", "mean_trace", "plain"),
+    )
+    stochastic_gamma: float = option(
+        0.99,
+        "tabular learner in a stochastic world: LSPI discount (a long horizon: the safe way round, not the "
+        "short risky one)",
+        min=0.0,
+        max=0.999,
+    )
+    stochastic_samples: int = option(
+        50_000, "tabular learner in a stochastic world: LSPI samples kept (the average of many outcomes)", min=10
+    )
+    frames: str = option(
+        "auto",
+        "discrete actions: compare traces in the frame of the start when some actions are rotations "
+        "(auto: found from experience, see agent.embedding.rotation_frames), or as they are (off)",
+        choices=("auto", "off"),
     )
     watch_after: float = option(
         0.9,
@@ -248,12 +278,15 @@ def iterate_job(
     basis: dict[str, Any] | None,
     refit: np.ndarray | None,
     fit: dict[str, Any],
+    tie_tolerance: float = 0.05,
 ) -> dict[str, Any]:
     """Feature refit (when `refit` holds the reservoir sample) and up to `iterations` LSPI
     iterations over a snapshot of the samples: the new basis (if refitted), weights, iterations
     done and the last change. Tabular when `store` is None. A pure function, run off the act path."""
     if store is None:
-        lspi = LSPI(TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=capacity)
+        lspi = LSPI(
+            TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=capacity, tie_tolerance=tie_tolerance
+        )
     else:
         rbf = _RBFFeatures(np.asarray(store), n_actions, int(fit["centres"]))
         if refit is not None:
@@ -263,7 +296,7 @@ def iterate_job(
         else:
             assert basis is not None
             _set_basis(rbf, basis)
-        lspi = LSPI(rbf, gamma=gamma, ridge=ridge, capacity=capacity)
+        lspi = LSPI(rbf, gamma=gamma, ridge=ridge, capacity=capacity, tie_tolerance=tie_tolerance)
     lspi.restore(samples)
     change, done = 0.0, 0
     for _ in range(iterations):  # policy iteration until the weights settle
@@ -286,12 +319,23 @@ def embed_job(
     estimator: str = "mode",
     distance: str = "padded",
     dtw_penalty: float = 1.0,
+    rotations: tuple[int, list[list[int]]] | None = None,
+    n_actions: int = 0,
+    reached: list[list[bool]] | None = None,
 ) -> dict[str, Any]:
     """Trace distances and classical MDS of each start's sampled traces (one sample each in a
-    deterministic world): edit distance of discrete actions; the padded sum or DTW of the action
-    values when `actions` is the table of a discretised box. Several samples: the mode trace, or
-    the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
-    if any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
+    deterministic world): edit distance of discrete actions (in the start's frame when `rotations`,
+    (order, [[action, power], ...]), says which actions turn: `frame_trace`); the padded sum or DTW
+    of the action values when `actions` is the table of a discretised box. Several samples: the mode
+    trace, or the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
+    symbols = n_actions
+    if rotations is not None and actions is None:
+        rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
+        traces = [[frame_trace(t, rot, n_actions) for t in s] for s in traces]
+        symbols = n_actions * (1 + rot.order)  # the labels frame_trace gives
+    if any(len(t) > 1 for t in traces) and estimator == "mean_trace" and actions is None:
+        D = mean_trace_distances(traces, symbols, reached)
+    elif any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
         D = mean_pair_distances(traces, substitution_cost=2)
     else:
         canon = [list(mode_trace(t)) for t in traces]
@@ -357,6 +401,7 @@ class GenericProgram(Program):
         self.stochastic = False
         self._transitions: dict[tuple[bytes, int], tuple[bytes, bytes | None]] = {}
         self._said_table_full = False
+        self._rotations: Rotations | None = None  # the rotations among the actions, once found
         lo = np.concatenate([np.full(int(np.prod(s.shape)), s.low, float) for s in spec.sensors])
         hi = np.concatenate([np.full(int(np.prod(s.shape)), s.high, float) for s in spec.sensors])
         span = np.where(hi > lo, hi - lo, 1.0)
@@ -406,6 +451,7 @@ class GenericProgram(Program):
         self._seen = 0
         self._fitted_at = 0
         self.lspi = LSPI(basis, gamma=prm.gamma, ridge=prm.ridge, capacity=prm.max_samples)
+        self._tie_tolerance = self.lspi.tie_tolerance
         self.phase = "explore"
         self.new_samples = 0
         self.relearn_at: int | None = None
@@ -424,11 +470,28 @@ class GenericProgram(Program):
         self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
         self._sweep_rbf: _RBFFeatures | None = None  # that basis while the accepted policy is swept
         self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
+        self._accepted_reached: list[bool] | None = None  # and which of its traces reached the goal
+        self._candidate_traces: list[list[int]] | None = None  # a better policy's traces, not yet confirmed
         self._diverged = False  # the trace in progress left the accepted policy's choices
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
+        self._start_scores: list[float] = []  # scores of the start state in progress (one per sample)
+        self._start_fair = True  # all of them came from the accepted policy's choices
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
         self.use_background(prm.learn_lag)
+
+    @property
+    def stochastic(self) -> bool:
+        """Whether the world was seen to be stochastic (traces are then sampled, `samples` per start)."""
+        return getattr(self, "_stochastic", False)
+
+    @stochastic.setter
+    def stochastic(self, value: bool) -> None:
+        if bool(value) != self.stochastic:
+            # trace scores change their measure (absolute vs relative to the accepted traces): the
+            # detector's reference must be learned afresh, or the change of scale reads as a drop
+            self.rebase_performance()
+        self._stochastic = bool(value)
 
     def describe(self) -> str:
         """The learner chosen for the world's observation (said in the attach event)."""
@@ -441,7 +504,7 @@ class GenericProgram(Program):
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
     def _new_sweep(self) -> StartStateSweep:
-        k = self.params.samples if self.stochastic else 1
+        k = self.params.samples if self.stochastic and self.params.estimator != "plain" else 1
         return StartStateSweep(self.spec.n_starts * k, self.max_trace, goal=lambda o: reached(self.goal, o), repeats=k)
 
     # observations -> states --------------------------------------------------------------------
@@ -550,6 +613,8 @@ class GenericProgram(Program):
             return
         self.stochastic = True
         self._transitions.clear()
+        self._plan_for_chance()
+
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
@@ -559,6 +624,22 @@ class GenericProgram(Program):
                 reason="stochastic",
             )
         )
+
+    def _plan_for_chance(self) -> None:
+        """The tabular learner in a stochastic world learns the expected outcome over a long horizon
+        (`stochastic_gamma`) from more of its experience (`stochastic_samples`); as given otherwise."""
+        if self.tabular:
+            chance = self.stochastic
+            self.lspi.gamma = g = self.params.stochastic_gamma if chance else self.params.gamma
+            # near-ties: a quarter of the gap 1 - gamma^2 between an optimal action and a detour
+            # (0.05 at the default 0.9; at 0.99 a detour is within 2 % and would pass for a tie)
+            self.lspi.tie_tolerance = 0.25 * (1.0 - g * g) if chance else self._tie_tolerance
+            self.lspi.capacity = cap = self.params.stochastic_samples if chance else self.params.max_samples
+            smp = self.lspi.samples()
+            if len(smp["s"]) > cap:  # back to fewer: the newest are kept
+                self.lspi.restore(
+                    {k: v[-cap:] if k in ("s", "a", "r", "s_next", "done") else v for k, v in smp.items()}
+                )
 
     # the program -------------------------------------------------------------------------------
     def _iterate(self) -> None:
@@ -585,6 +666,7 @@ class GenericProgram(Program):
             basis=None if self.tabular else _basis_state(self._rbf),
             refit=refit,
             fit={"components": prm.components, "centres": prm.centres, "width": prm.width},
+            tie_tolerance=self.lspi.tie_tolerance,
         )
 
     def _iterated(self, result: dict[str, Any], step: int) -> None:
@@ -637,6 +719,7 @@ class GenericProgram(Program):
         self._sweep = self._new_sweep()
         self._diverged = False
         self._unfed = []
+        self._start_scores, self._start_fair = [], True
         # a random order: the detector then sees trace scores in no spatial order (a run of far
         # starts, long traces, would look like a drop)
         return self._sweep.begin([int(i) for i in self.rng.permutation(self.spec.n_starts)])
@@ -645,6 +728,22 @@ class GenericProgram(Program):
         """A sweep finished: accept, publish, feed the detector, or sweep the accepted policy again."""
         sw = self._sweep
         k = sw.repeats
+        if self.stochastic and k > 1 and all(sw.traces[i] == sw.traces[i - i % k] for i in range(len(sw.traces))):
+            # every start's samples were the same trace: the policy controls whatever made the
+            # transitions differ (or distinct states looked alike), so one trace per start will do
+            # (ch. 9.4); the transitions are watched again from here
+            sw.traces, sw.reached = sw.traces[::k], sw.reached[::k]
+            sw.repeats, k, sw.rewarded = 1, 1, sum(sw.reached)
+            self.stochastic = False
+            self._plan_for_chance()
+            self.emit(
+                EventOutput(
+                    EventKind.POLICY_ITERATION,
+                    "the sampled traces from every start state were the same: one trace per start state again",
+                    step,
+                    reason="deterministic",
+                )
+            )
         score = _sweep_score(sw.reached, sw.traces)
         frac, length = score
         good = frac >= self.params.watch_after
@@ -659,29 +758,68 @@ class GenericProgram(Program):
         self.phase = "explore"
         if self._watching and not self._checking and self._accepted is not None and not (better or same):
             if equal:
-                # as good as the accepted policy but other traces (ties broken another way): its
-                # scores are fair for the detector; the accepted map stays the published one
-                self._perf.extend(self._unfed)
+                # as good as the accepted policy but other traces (ties broken another way): the
+                # accepted map stays the published one; its scores are fair for the detector only
+                # where they are absolute (a stochastic world), not relative to the accepted traces
+                if self.stochastic:
+                    self._perf.extend(self._unfed)
                 return None
             # the newest policy is worse than the accepted one: not published, not judged by the
             # detector; the accepted policy is swept again, so that a changed world still shows
             return self._start_sweep(check=True)
-        if self._watching or good:  # the scores not yet fed as their traces ended (see `_sweep_act`)
+        traces = [list(t) for t in sw.traces]
+        # scores held back as their traces ended (see `_sweep_act`) are fed when they are absolute
+        # (a stochastic world, or nothing accepted yet), never when relative to the accepted traces
+        absolute = self.stochastic or self._accepted_reached is None
+        if self._watching and not self._checking and better and not same and self.tabular and not self.stochastic:
+            if traces != self._candidate_traces:
+                # a better policy, seen once: published when the next policy iteration keeps its
+                # traces - a policy still changing from one iteration to the next has not converged,
+                # and the maps of its passing detours can be far worse than the accepted one
+                self._candidate_traces = traces
+                if absolute:
+                    self._perf.extend(self._unfed)  # better than the accepted policy: its scores are fair
+                return None
+        if (self._watching or good) and absolute:
             self._perf.extend(self._unfed)
         relearned = good and self.relearn_at is not None
         if not self._checking and (better or not self._watching):
             self._accepted, self._best = np.array(self._sweep_w, copy=True), score
-            self._accepted_traces = [list(t) for t in sw.traces]
+            self._accepted_traces = traces
+            self._accepted_reached = [bool(r) for r in sw.reached]
+            self._candidate_traces = None
             self._accepted_basis = None if self.learner != "lspi" else _basis_state(self._rbf)
         self._watching = self._watching or good
         self._embed(step, relearned, k)
         self._checking = False
         return None
 
+    def _find_rotations(self, step: int) -> Rotations | None:
+        """Tabular learner, discrete actions, `frames=auto`: the rotations among the actions, found
+        again at each embedding from the transitions seen so far (an event says when they change);
+        forgotten on a drop."""
+        if self.tabular and self.discrete and self.params.frames == "auto" and self._transitions:
+            nxt = {k: first for k, (first, other) in self._transitions.items() if other is None}
+            found = find_rotations(nxt, range(self.n_actions))
+            if found != self._rotations and found is not None:
+                turns = ", ".join(f"action {a} = {p} turn(s)" for a, p in found.powers)
+                self.emit(
+                    EventOutput(
+                        EventKind.POLICY_ITERATION,
+                        f"some actions are rotations ({turns}; {found.order} make a full turn): "
+                        "traces are compared in the frame of their start",
+                        step,
+                        reason="rotations",
+                    )
+                )
+            self._rotations = found
+        return self._rotations
+
     def _embed(self, step: int, relearned: bool, k: int) -> None:
         """Start the distances + MDS job on the sweep's traces; `relearned`: the first good policy
         after a drop (the trigger will say so, with the drop's step)."""
         traces = [list(t) for t in self._sweep.traces]
+        rot = self._find_rotations(step)
         n = len(traces) // k
         per_start = [traces[i * k : (i + 1) * k] for i in range(n)]
         assert self.background is not None
@@ -690,11 +828,14 @@ class GenericProgram(Program):
             "embed",
             embed_job,
             traces=per_start,
+            reached=[list(self._sweep.reached[i * k : (i + 1) * k]) for i in range(n)],
             actions=None if self.discrete else self.actions.copy(),
             dims=self.dims,
             estimator=prm.estimator,
             distance=prm.distance,
             dtw_penalty=prm.dtw_penalty,
+            rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
+            n_actions=self.n_actions,
         )
         frac, length = _sweep_score(self._sweep.reached, traces)
         self._pending_embedding = {
@@ -711,6 +852,7 @@ class GenericProgram(Program):
             "samples_per_start": float(k),
             "stochastic": float(self.stochastic),
             "accepted_policy": float(self._checking),
+            "rotation_order": float(rot.order if rot is not None else 0),
         }
         if relearned:
             self.relearn_at = None
@@ -730,6 +872,7 @@ class GenericProgram(Program):
             "samples_per_start",
             "stochastic",
             "accepted_policy",
+            "rotation_order",
         )
         self.emit(
             EmbeddingOutput(
@@ -882,11 +1025,17 @@ class GenericProgram(Program):
             # else only if the newer policy is accepted when the sweep ends
             assert self._sweep.last is not None
             trace, ok = self._sweep.last
-            score = self.lspi.gamma ** len(trace) if ok else 0.0
-            if self._watching and (self._checking or not self._diverged):
-                self._perf.append(score)
-            else:
-                self._unfed.append(score)
+            self._start_scores.append(self._trace_score(self._sweep.started[-1], trace, ok))
+            self._start_fair = self._start_fair and (self._checking or not self._diverged)
+            if len(self._start_scores) >= self._sweep.repeats:
+                # one value per start state: its samples' mean (samples of one start run in a row,
+                # and a run of like scores would read as a drop)
+                score = float(np.mean(self._start_scores))
+                if self._watching and self._start_fair:
+                    self._perf.append(score)
+                else:
+                    self._unfed.append(score)
+                self._start_scores, self._start_fair = [], True
             self._diverged = False
         if self.sarsa is not None and not self._checking and self.params.epsilon == 0.0:
             self._learn_in_sweep(obs, None if dec.reset else int(dec.values[0]))
@@ -897,6 +1046,23 @@ class GenericProgram(Program):
             if again is not None:
                 return again
         return dec
+
+    def _trace_score(self, start: int, trace: list[int], ok: bool) -> float:
+        """The detector's value of a trace. In a deterministic world, relative to the accepted
+        policy's own trace from that start: 1 while it does what it did (as long or shorter, or
+        failing where it failed), gamma per extra step, 0 for a goal no longer reached - so an
+        unchanged world gives a constant stream, however long or varied the traces (a sweep of many
+        starts in random order would otherwise show runs of long traces that read as drops), and
+        any change the policy meets shows at once. Otherwise (stochastic, or nothing accepted yet)
+        gamma^length at the goal, else 0."""
+        gamma = self.lspi.gamma
+        ref = self._accepted_traces
+        if self.stochastic or ref is None or self._accepted_reached is None or start >= len(self._accepted_reached):
+            return gamma ** len(trace) if ok else 0.0
+        was = self._accepted_reached[start]
+        if not ok:
+            return 0.0 if was else 1.0
+        return 1.0 if not was else min(1.0, gamma ** (len(trace) - len(ref[start])))
 
     def performance(self, obs: Observation) -> float | None:
         return self._perf.pop(0) if self._perf else None
@@ -915,9 +1081,10 @@ class GenericProgram(Program):
         self._perf.clear()
         self._watching = False
         self._accepted, self._best, self._checking = None, None, False
-        self._accepted_traces = None
+        self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
+        self._rotations = None
         self.emit(
             EventOutput(EventKind.RELEARNING, "samples and policy dropped; relearning from fresh experience", step)
         )
@@ -958,7 +1125,14 @@ class GenericProgram(Program):
             "sweep_on_accepted_basis": self._sweep_rbf is not None,
             "diverged": self._diverged,
             "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
+            "accepted_reached": self._accepted_reached,
             "unfed": list(self._unfed),
+            "candidate_traces": None if self._candidate_traces is None else [list(t) for t in self._candidate_traces],
+            "start_scores": list(self._start_scores),
+            "start_fair": self._start_fair,
+            "rotations": None
+            if self._rotations is None
+            else [self._rotations.order, [list(p) for p in self._rotations.powers]],
         }
         if self.sarsa is not None:
             out["sarsa"] = self.sarsa.state()
@@ -970,6 +1144,8 @@ class GenericProgram(Program):
 
     def restore(self, state: dict[str, Any]) -> None:
         super().restore(state)
+        self.stochastic = bool(state.get("stochastic", False))
+        self._plan_for_chance()  # the capacity the saved samples were kept under
         self.lspi.restore(state["lspi"])
         self.phase, self.new_samples = str(state["phase"]), int(state["new_samples"])
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
@@ -978,7 +1154,6 @@ class GenericProgram(Program):
         self._prev_x = None if px is None else np.asarray(px, dtype=np.float64)
         pk = state.get("prev_key")
         self._prev_key = None if pk is None else bytes.fromhex(str(pk))
-        self.stochastic = bool(state.get("stochastic", False))
         self._sweep = self._new_sweep()
         self._sweep.restore(state["sweep"])
         self._perf = [float(v) for v in state["perf"]]
@@ -1003,7 +1178,15 @@ class GenericProgram(Program):
         self._diverged = bool(state.get("diverged", False))
         at = state.get("accepted_traces")
         self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
+        ar = state.get("accepted_reached")
+        self._accepted_reached = None if ar is None else [bool(r) for r in ar]
         self._unfed = [float(v) for v in state.get("unfed", [])]
+        ct = state.get("candidate_traces")
+        self._candidate_traces = None if ct is None else [[int(a) for a in t] for t in ct]
+        self._start_scores = [float(v) for v in state.get("start_scores", [])]
+        self._start_fair = bool(state.get("start_fair", True))
+        rot = state.get("rotations")
+        self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
             self._warm = int(state["warm"])

@@ -3,7 +3,8 @@ control, MiniGrid, panda-gym), in-process and seeded. Per world and seed: final 
 error of the embeddings against the declared truth, trustworthiness of the final one, the fraction
 of starts whose greedy trace reached the goal, steps and seconds to the first embedding below 0.1,
 whether any version after convergence was over 1.5x worse than the best before it without a detected
-drop, drops detected in a run with no perturbation, and beside them the sensor-only peers (PCA and
+drop (and the worst ratio of a version to the best before it, after convergence), drops detected in
+a run with no perturbation (false alarms: nothing here perturbs the world), and beside them the sensor-only peers (PCA and
 Isomap of the start observations, as ch. 6 does)."""
 
 from __future__ import annotations
@@ -42,6 +43,17 @@ ZOO: tuple[ZooWorld, ...] = (
     ZooWorld("FrozenLake 8x8", "gym:FrozenLake-v1", {"map_name": "8x8", "is_slippery": "false"}, {}, 30_000, 10_000),
     ZooWorld("FrozenLake 4x4 slippery", "gym:FrozenLake-v1", {}, {}, 60_000, 20_000),
     ZooWorld("FrozenLake 4x4 slippery, mean estimator", "gym:FrozenLake-v1", {}, {"estimator": "mean"}, 60_000, 20_000),
+    ZooWorld(
+        "FrozenLake 4x4 slippery, mean trace",
+        "gym:FrozenLake-v1",
+        {},
+        {"estimator": "mean_trace", "samples": "64"},
+        100_000,
+        30_000,
+    ),
+    ZooWorld(
+        "FrozenLake 4x4 slippery, plain estimator", "gym:FrozenLake-v1", {}, {"estimator": "plain"}, 60_000, 20_000
+    ),
     ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 30_000, 10_000),
     ZooWorld("MiniGrid Empty 8x8", "gym:MiniGrid-Empty-8x8-v0", {}, {}, 60_000, 20_000, "minigrid"),
     ZooWorld("MountainCar", "gym:MountainCar-v0", {}, {}, 100_000, 30_000),
@@ -93,6 +105,24 @@ def sensor_peers(world: Any, dims: int) -> dict[str, float | None]:
     return out
 
 
+def post_convergence(embs: list[Any], drops: list[int]) -> tuple[int, float | None]:
+    """After convergence (the first version that reached the goal from >= 90 % of starts): how many
+    versions were more than 1.5x worse than the best before them, and the worst such ratio (version
+    error / best error before it), leaving out versions that follow a detected drop."""
+    regressions, worst = 0, None
+    best = None
+    converged = False
+    for e in embs:
+        converged = converged or e.metrics.get("goal_reached_fraction", 0.0) >= 0.9
+        err = float(e.procrustes_error or 0.0)
+        if converged and best is not None and not any(d < e.step for d in drops):
+            ratio = err / max(best, 1e-9)
+            worst = ratio if worst is None else max(worst, ratio)
+            regressions += int(err > 1.5 * best + 1e-9)
+        best = err if best is None else min(best, err)
+    return regressions, worst
+
+
 def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
     """One seeded in-process run of entry `z`."""
     with make_world(z.world, None, seed, z.params) as w:
@@ -116,15 +146,7 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
     drops = [e.step for e in run.events(EventKind.DROP_DETECTED)]
     # after convergence (the first version that reached the goal from >= 90 % of starts), no version
     # more than 1.5x worse than the best before it, unless a drop was detected before it
-    regressions = 0
-    best = None
-    converged = False
-    for e in embs:
-        converged = converged or e.metrics.get("goal_reached_fraction", 0.0) >= 0.9
-        err = float(e.procrustes_error or 0.0)
-        if converged and best is not None and err > 1.5 * best + 1e-9 and not any(d < e.step for d in drops):
-            regressions += 1
-        best = err if best is None else min(best, err)
+    regressions, worst = post_convergence(embs, drops)
     trust = None
     if embs and truth is not None:
         pos = np.asarray(truth.tensors["positions"], dtype=np.float64)[np.asarray(embs[-1].ids)]
@@ -148,6 +170,7 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
         "steps_to_0.1": first.get("step"),
         "seconds_to_0.1": round(first["seconds"], 1) if "seconds" in first else None,
         "regressions": regressions,
+        "worst_ratio": worst,
         "drops": len(drops),
         **peers,
     }
@@ -176,6 +199,7 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             {"world": label, "seeds": len(rs), "learner": rs[0]["learner"], "goal": rs[0]["goal"]}
             | {k: _mean(rs, k) for k in keys}
             | {"regressions": sum(r["regressions"] for r in rs), "drops": sum(r["drops"] for r in rs)}
+            | {"worst_ratio": max((r["worst_ratio"] for r in rs if r.get("worst_ratio") is not None), default=None)}
         )
     return out
 
@@ -223,6 +247,7 @@ def main(seeds: int = 3, quick: bool = False, only: list[str] | None = None, jso
         "pca_error",
         "isomap_error",
         "regressions",
+        "worst_ratio",
         "drops",
     )
     print("| " + " | ".join(cols) + " |")
@@ -243,4 +268,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json))
 
 
-__all__ = ["ZOO", "ZooWorld", "main", "run_one", "sensor_peers", "summary"]
+__all__ = ["ZOO", "ZooWorld", "main", "post_convergence", "run_one", "sensor_peers", "summary"]

@@ -4,7 +4,8 @@ A lesion of radius r centred r px right of the retina centre (off-centre, touchi
 the spot lands after a good saccade), at saccade `at`; the basic and the robust learning rules,
 seeded runs each; greedy post-saccade activation (30 repositions) before the lesion, right after
 it and at the end. Run: ``python -m sensorimotor.tools.experiments.lesion_sweep [--runs 3]
-[--radii 3,6,10,16] [--out FILE.md]``.
+[--radii 3,6,10,16] [--out FILE.md]``; with ``--out`` it also writes FILE.json (the command, the
+table's markdown and every run), which the documentation's table is generated from.
 """
 
 from __future__ import annotations
@@ -96,17 +97,25 @@ def main(argv: list[str] | None = None) -> int:
         (s, rule, rad, a.at, a.steps, a.every) for rad in radii for rule in ("basic", "robust") for s in range(a.runs)
     ]
     res = _pool_map(job, jobs, a.workers)
+    command = (
+        f"python -m sensorimotor.tools.experiments.lesion_sweep --runs {a.runs} --radii {a.radii} --at {a.at} "
+        f"--steps {a.steps} --every {a.every}"
+    )
+    seconds = time.time() - t0
     md = (
         f"Lesion sweep: {a.runs} seeds, lesion at saccade {a.at} of {a.steps}, greedy activation every {a.every} "
-        f"(`python -m sensorimotor.tools.experiments.lesion_sweep --runs {a.runs} --radii {a.radii}`, "
-        f"{time.time() - t0:.0f} s)\n\n" + table(res, radii)
+        f"(`{command}`, {seconds:.0f} s)\n\n" + table(res, radii)
     )
     print(md)
     if a.out:
         with open(a.out, "w") as f:
             f.write(md + "\n")
         with open(a.out.rsplit(".", 1)[0] + ".json", "w") as f:
-            json.dump(res, f)
+            json.dump(
+                {"command": command, "seconds": seconds, "radii": radii, "markdown": md, "results": res},
+                f,
+                default=float,
+            )
     return 0
 
 

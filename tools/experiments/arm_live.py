@@ -1,0 +1,93 @@
+"""The arm live over the bus, several seeds at once: one `sme agent` and `--seeds` arm worlds
+(`sme world arm --seed S --id arm-S`, defaults: the Kuka iiwa, joints 2 and 4, 7 x 7 starts) on
+loopback Zenoh; every `--every` seconds the agent's status is read, and at the end each world's
+last embedding error, the step it first fell below 0.1, and the drops the agent detected.
+
+    python -m sensorimotor.tools.experiments.arm_live --seeds 5 --seconds 600
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from typing import Any
+
+from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.tools.common import free_port
+from sensorimotor.tools.status import fetch_status
+
+
+def main(seeds: int, seconds: float, every: float = 2.0, params: list[str] | None = None) -> dict[str, Any]:
+    """Run the agent and the worlds for `seconds`; per seed its links' last status rows."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    cli = [sys.executable, "-m", "sensorimotor.tools.cli"]
+    quiet = ["-q", "--no-multicast-scouting"]
+    procs = [subprocess.Popen([*cli, "agent", "--listen", endpoint, *quiet], stderr=subprocess.DEVNULL)]
+    extra = [a for p in params or [] for a in ("--param", p)]
+    for s in range(seeds):
+        cmd = [*cli, "world", "arm", "--seed", str(s), "--id", f"arm-{s}", *extra, "--connect", endpoint, *quiet]
+        procs.append(subprocess.Popen(cmd, stderr=subprocess.DEVNULL))
+    seen: dict[int, dict[str, Any]] = {}
+    t0 = time.monotonic()
+    try:
+        bus = None
+        while bus is None:  # the agent takes a moment to listen
+            try:
+                bus = Bus(BusConfig.for_role("tool", endpoint))
+            except BusError:
+                if time.monotonic() - t0 > 60:
+                    raise
+                time.sleep(0.5)
+        with bus:
+            while time.monotonic() - t0 < seconds:
+                try:
+                    st = fetch_status(bus, "a0", 2.0)
+                except BusError:
+                    st = None
+                for ln in st.links if st is not None else []:
+                    if not ln.world_id.startswith("arm-") or not ln.embedding_version:
+                        continue
+                    row = seen.setdefault(int(ln.world_id[4:]), {"first_below_0.1": None})
+                    row.update(steps=int(ln.steps), version=int(ln.embedding_version), drops=int(ln.drops))
+                    row["error"] = round(float(ln.last_procrustes_error), 4)
+                    if row["first_below_0.1"] is None and row["error"] < 0.1:
+                        row["first_below_0.1"] = row["steps"]
+                time.sleep(every)
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+    return {"seeds": seen, "seconds": round(time.monotonic() - t0)}
+
+
+def _cli(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m sensorimotor.tools.experiments.arm_live", description=__doc__)
+    p.add_argument("--seeds", type=int, default=5, help="arm worlds, seeds 0..N-1 (default 5)")
+    p.add_argument("--seconds", type=float, default=600.0, help="how long to run (default 600)")
+    p.add_argument("--param", action="append", metavar="K=V", help="world parameter for every arm")
+    a = p.parse_args(argv)
+    if a.seeds < 1 or a.seconds <= 0:
+        p.error("--seeds must be >= 1 and --seconds > 0")
+    res = main(a.seeds, a.seconds, params=a.param)
+    for s, row in sorted(res["seeds"].items()):
+        print(f"seed {s}: {row}")
+    errors = [row["error"] for row in res["seeds"].values()]
+    if not errors:
+        print(f"no embedding in {res['seconds']} s")
+        return 1
+    drops = sum(row["drops"] for row in res["seeds"].values())
+    print(
+        f"{len(errors)} of {a.seeds} worlds embedded; final error mean {sum(errors) / len(errors):.4f}, "
+        f"worst {max(errors):.4f}; drops detected {drops} (no change was made); {res['seconds']} s"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_cli())
