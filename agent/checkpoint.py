@@ -274,6 +274,36 @@ def check_values(ckpt: Checkpoint, now: float | None = None) -> None:
             raise CheckpointError(f"the array {path} holds NaN or infinite values")
 
 
+def check_shapes(saved: Any, fresh: Any, path: str = "program_state") -> None:
+    """Refuse a saved state whose arrays do not fit the program it would be restored into.
+
+    `fresh` is the `state()` of a program (or detector) just built for the world's spec with the
+    checkpoint's params: every array it holds with at least one element has a shape fixed by that
+    spec and those params (weights, tables, filters), and the saved array at the same path must
+    have that shape and the same kind of dtype (float, int, bool). Arrays the fresh state holds
+    empty grow while learning (sample buffers) and are not compared, nor values the fresh state
+    holds as anything but an array. CheckpointError names the first array that does not fit."""
+    if isinstance(fresh, np.ndarray):
+        if fresh.size == 0:
+            return
+        if not isinstance(saved, np.ndarray):
+            raise CheckpointError(f"{path} is {type(saved).__name__}, the program keeps an array {list(fresh.shape)}")
+        if saved.shape != fresh.shape:
+            raise CheckpointError(
+                f"the array {path} has shape {list(saved.shape)}, the program keeps {list(fresh.shape)} for this world"
+            )
+        if saved.dtype.kind != fresh.dtype.kind and {saved.dtype.kind, fresh.dtype.kind} != {"i", "u"}:
+            raise CheckpointError(f"the array {path} is {saved.dtype.name}, the program keeps {fresh.dtype.name}")
+        return
+    if isinstance(fresh, dict) and isinstance(saved, dict):
+        for k, v in fresh.items():
+            if k in saved:
+                check_shapes(saved[k], v, f"{path}.{k}")
+    elif isinstance(fresh, list) and isinstance(saved, list) and len(fresh) == len(saved):
+        for i, (a, b) in enumerate(zip(saved, fresh, strict=True)):
+            check_shapes(a, b, f"{path}.{i}")
+
+
 def _arrays(value: Any, path: str = "") -> list[tuple[str, np.ndarray]]:
     if isinstance(value, np.ndarray):
         return [(path, value)]

@@ -30,6 +30,7 @@ from sensorimotor.agent.checkpoint import (
     FORMAT_VERSION,
     Checkpoint,
     CheckpointError,
+    check_shapes,
     encode_checkpoint,
     read_checkpoint,
     set_aside_checkpoint,
@@ -40,7 +41,8 @@ from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.lease import LeaseClient, Outcome, lost_by
 from sensorimotor.agent.link import WorldLink, check_truth
 from sensorimotor.agent.ownership import OwnerBook, claim_key, plan
-from sensorimotor.agent.programs.registry import check_program_params, make_program
+from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, make_program
+from sensorimotor.agent.rate_limit import TokenBucket
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
@@ -61,6 +63,17 @@ from sensorimotor.protocol.messages import (
 from sensorimotor.protocol.params import as_strings, parse
 
 log = logging.getLogger("sme.agent")
+
+
+def _import_programs() -> None:
+    """Import every program's module now, beside the first worlds, not inside a later attach: the
+    first world of a kind would otherwise hold the process (its GIL) for the import, ~1.5 s for the
+    generic program's scipy.stats and filterpy, while its lockstep worlds wait for their answers."""
+    for kind in PROGRAMS.values():
+        try:
+            kind.program_class()
+        except Exception as e:  # noqa: BLE001 - a broken optional dependency: the attach reports it
+            log.debug("program module %s not imported: %s", kind.module, e)
 
 
 class _Unrestorable(Exception):
@@ -214,8 +227,20 @@ class AgentDaemon:
         self._pubs: dict[str, Any] = {}
         self._versions: dict[str, int] = {}  # world -> embedding version high-water mark written
         self._lock = threading.Lock()
+        # log lines about refused input (bad truths, world events, checkpoints; worlds that cannot be
+        # attached): a few per second at most, every item still counted (hostile input comes at bus speed)
+        self._warnings = TokenBucket(self.WARN_RATE)
         if state_dir:
             os.makedirs(state_dir, exist_ok=True)
+
+    WARN_RATE = 5.0  # log lines per second about refused input, at most (see `_warn`)
+
+    def _warn(self, fmt: str, *args: Any) -> None:
+        """Log a warning about refused input, rate-limited (`WARN_RATE`); the next line that gets
+        through says how many were left out. The counters count every item."""
+        if self._warnings.take():
+            n = self._warnings.suppressed()
+            log.warning(fmt + (f" ({n} similar warnings not logged)" if n else ""), *args)
 
     # publishing --------------------------------------------------------------------------------
     def _publisher(self, key: str, schema: str) -> Any:
@@ -340,11 +365,11 @@ class AgentDaemon:
             shared = codec.decode(SharedCheckpoint, msg.payload)
         except ProtocolError as e:
             self.counters["bad_checkpoint"] += 1
-            log.warning("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], clip(str(e)))
+            self._warn("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], clip(str(e)))
             return
         if shared.world_id != wid:
             self.counters["bad_checkpoint"] += 1
-            log.warning(
+            self._warn(
                 "checkpoint shared by %s on world %s's key is for world %s: refused",
                 owner[:64],
                 wid[:64],
@@ -354,7 +379,7 @@ class AgentDaemon:
         why = self.store.offer(owner, wid, shared.data)
         if why is not None:
             self.counters["bad_checkpoint"] += 1
-            log.warning("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], why)
+            self._warn("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], why)
 
     def _on_embedding(self, msg: BusMessage) -> None:
         """Note the embedding version any agent published (a takeover says when its copy is older)."""
@@ -399,7 +424,7 @@ class AgentDaemon:
             check_truth(truth, link.world_id)
         except ProtocolError as e:
             self.counters["bad_truth"] += 1
-            log.warning("world %s: bad truth message: %s", link.world_id, e)
+            self._warn("world %s: bad truth message: %s", link.world_id, e)
             return
         link.truth = truth
 
@@ -413,7 +438,7 @@ class AgentDaemon:
                 raise SpecMismatch(f"world event for world {ev.world_id!r} arrived on {link.world_id!r}'s key")
         except ProtocolError as e:
             self.counters["bad_world_event"] += 1
-            log.warning("world %s: bad world event: %s", link.world_id, e)
+            self._warn("world %s: bad world event: %s", link.world_id, e)
             return
         if ev.kind == WorldEventKind.LEASE_LOST:
             if link.state == "attached" and lost_by(ev, self.owner_id, link.epoch):
@@ -463,14 +488,18 @@ class AgentDaemon:
 
     # attach / pause ----------------------------------------------------------------------------
     def _fetch(self, key: str, cls: type, tries: int = 3) -> Any:
+        """The first reply to a query on `key` decoded as `cls` (None: no reply in `tries` tries).
+        A reply that does not decode raises at once (asking again gets the same bytes); no reply or
+        an error reply (a timeout on one of two routes) is asked again."""
         last: Exception | None = None
         for _ in range(tries):
             try:
                 replies = self.bus.get(key, timeout=1.0)
+            except BusError as e:
+                last = e
+            else:
                 if replies:
                     return codec.decode(cls, replies[0].payload)
-            except (BusError, ProtocolError) as e:
-                last = e
             if self._stop.is_set():
                 break
         if last is not None:
@@ -503,7 +532,14 @@ class AgentDaemon:
             try:
                 restored = self._restore(spec, shared, "shared checkpoint")
             except _Unrestorable as e:
-                log.warning("world %s: the checkpoint shared on the bus %s", spec.world_id, e)
+                self.counters["bad_checkpoint"] += 1
+                log.warning("world %s: the checkpoint shared on the bus %s; set aside", spec.world_id, e)
+                self.event(
+                    spec.world_id,
+                    EventKind.BAD_INPUT,
+                    clip(f"checkpoint shared on the bus set aside: it {e}"),
+                    "bad_checkpoint",
+                )
                 self.store.drop(spec.world_id)
             else:
                 self.counters["taken_over"] += 1
@@ -554,11 +590,18 @@ class AgentDaemon:
                     saved.program_params,
                     wanted,
                 )
-            program.restore(saved.program_state)
             detector = None
             if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
                 detector = make_detector(self.detector, **program.detector_params)
+            # arrays of the shapes this world's program keeps, before anything is restored from them
+            check_shapes(saved.program_state, program.state(), "program_state")
+            if detector is not None and saved.detector_state is not None:
+                check_shapes(saved.detector_state, detector.state(), "detector_state")
+            program.restore(saved.program_state)
+            if detector is not None and saved.detector_state is not None:
                 detector.restore(saved.detector_state)
+        except CheckpointError as e:
+            raise _Unrestorable(f"does not fit this world's program: {e}") from None
         except (ValueError, KeyError, TypeError, IndexError, AttributeError, ProtocolError) as e:
             raise _Unrestorable(f"cannot be restored ({type(e).__name__}: {e})") from None
         return Restored(program, saved.version, detector, saved.steps)
@@ -784,7 +827,7 @@ class AgentDaemon:
             return out
         if out.unfenced:
             self.counters["unfenced"] += 1
-            log.warning(
+            self._warn(
                 "world %s answers no lease request (a world written before leases): answered unfenced, "
                 "only the claim protocol keeps a second owner away",
                 wid,
@@ -844,8 +887,10 @@ class AgentDaemon:
         world if least loaded, and attach the worlds whose claim has settled."""
         now = time.monotonic()
         view = self.book.view()
+        me = self.owner_id
         for w in view.worlds:
-            if view.claimants(w) - {self.owner_id} or w in self._claims:
+            c = view.claims.get(w)
+            if w in self._claims or (c is not None and (len(c) > 1 or me not in c)):  # claimed by another
                 self.book.unclaimed_since.pop(w, None)
             else:
                 self.book.unclaimed_since.setdefault(w, now)
@@ -906,7 +951,7 @@ class AgentDaemon:
                 self._failed.discard(w)  # no spec reply last time (a route being rebuilt?): once more
                 self._retry_spec.pop(w, None)
                 self._retried.add(w)  # a second failure is not counted or reported again
-            if w in self._failed or any(o < self.owner_id for o in self.book.view().claimants(w)):
+            if w in self._failed or any(o < self.owner_id for o in self.book.claimants(w)):
                 continue  # tried once this appearance / withdrawn at the next tick
             if now - self._waiting.get(w, float("-inf")) < self.LEASE_RETRY:
                 continue  # its lease is held by another owner: ask again in a moment
@@ -940,6 +985,16 @@ class AgentDaemon:
             log.info("world %s is driven by an outside controller (program %r): not attached", wid, spec.program)
             self.event(wid, EventKind.ATTACH_FAILED, "the world is driven by an outside controller", "external")
             return
+        fresh: Any = None
+        known = self.links.get(wid)
+        if known is None or not same_body(known.spec, spec):
+            # the program first: a world no program fits (a broken or fake one) fails here, before a
+            # lease, truth or checkpoint query is sent for it (building one costs < 0.1 s once imported)
+            try:
+                fresh = make_program(spec, self.seed, **self.program_params.get(program_name(spec), {}))
+            except Exception as e:  # noqa: BLE001 - SpecMismatch, KeyError, MemoryError (a huge state space), ...
+                self._attach_failed(wid, "no_program", e)
+                return
         lease = self._take_lease(wid)
         if lease is None:
             return  # held by another live owner: the claim stays, own() asks again
@@ -975,6 +1030,8 @@ class AgentDaemon:
                 previous=previous,
                 restored=restored,
                 last_published=last,
+                program=fresh,
+                detector=None if fresh is None else make_detector(self.detector, **fresh.detector_params),
             )
         except Exception as e:  # noqa: BLE001 - no program fits this spec (KeyError, MemoryError, ...); the daemon goes on
             self.leases.release(wid, epoch)
@@ -1015,7 +1072,7 @@ class AgentDaemon:
             log.debug("world %s: still cannot attach: %s", wid, clip(str(e)))
             return
         self.counters["attach_failed"] += 1
-        log.warning("world %s: cannot attach: %s", wid, clip(str(e)))
+        self._warn("world %s: cannot attach: %s", wid, clip(str(e)))
         self.event(wid, EventKind.ATTACH_FAILED, str(e), reason)
 
     def _detach(self, wid: str) -> None:
@@ -1098,24 +1155,41 @@ class AgentDaemon:
         self.bus.watch_alive(keys.ALL_ALIVE_WORLDS, self._on_alive, history=True)
         if self.workers:
             threading.Thread(target=self._poll_workers, name="poll-workers", daemon=True).start()
+        threading.Thread(target=_import_programs, name="import-programs", daemon=True).start()
+
+    TICK = 0.1  # seconds between two ownership ticks when no world appeared or vanished
+    MIN_TICK = 0.02  # when some did or the last tick claimed one: at most one per MIN_TICK (a tick is O(worlds))
 
     def run(self, seconds: float | None = None) -> None:
         """Process attach/detach until stop() or `seconds` elapse."""
         t0 = time.monotonic()
         last_ckpt = last_sweep = last_share = t0
+        last_tick = float("-inf")
+        busy = False  # the last tick claimed a world (more may wait: the next tick comes at MIN_TICK)
         sweep_every = min(1.0, self.link_ttl / 2) if self.link_ttl is not None else None
         while not self._stop.is_set():
             if seconds is not None and time.monotonic() - t0 >= seconds:
                 break
             try:
-                wid, alive = self._changes.get(timeout=0.1)
+                changes = [self._changes.get(timeout=self.MIN_TICK if busy else self.TICK)]
             except queue.Empty:
-                wid = None
-            if wid is not None and not alive:
-                self._detach(wid)
+                changes = []
+            while True:  # every change queued so far, then one tick for all of them
+                try:
+                    changes.append(self._changes.get_nowait())
+                except queue.Empty:
+                    break
+            for wid, alive in changes:
+                if not alive:
+                    self._detach(wid)
+            if time.monotonic() - last_tick < (self.MIN_TICK if changes or busy else self.TICK):
+                continue  # a burst of worlds appearing or vanishing is one tick, not one each
+            last_tick = time.monotonic()
             try:
                 self._handle_lost()
+                claims = self.counters["claimed"]
                 self.own()
+                busy = self.counters["claimed"] > claims  # one claim per tick: the next one soon
                 self.share_new_versions()
             except Exception:  # noqa: BLE001 - one bad tick must not stop the daemon
                 if self.bus.closed:

@@ -80,6 +80,11 @@ class OwnerBook:
         c = self._claims.get(world)
         return c is not None and bool(c) and (me not in c or len(c) > 1)
 
+    def claimants(self, world: str) -> frozenset[str]:
+        """The owners claiming `world` now (a copy; cheaper than a whole `view` per world)."""
+        with self._lock:
+            return frozenset(self._claims.get(world, ()))
+
     def view(self) -> View:
         """A consistent snapshot."""
         with self._lock:
@@ -142,14 +147,22 @@ def plan(
     mine = set(mine)
     release: dict[str, str] = {}
     for w in sorted(mine):
-        lower = sorted(o for o in view.claimants(w) if o < me)
         if w not in view.worlds:
             release[w] = "world gone"
-        elif lower:
-            release[w] = f"{lower[0]} claims it too (the lower owner id wins)"
+            continue
+        claimants = view.claims.get(w, frozenset())
+        if len(claimants) > 1 or me not in claimants:  # (the usual case, alone: nothing to compare)
+            lower = min((o for o in claimants if o < me), default=None)
+            if lower is not None:
+                release[w] = f"{lower} claims it too (the lower owner id wins)"
     held = mine - set(release)
     owners = set(view.owners) | {me}
-    loads = {o: view.load(o) for o in owners}
+    loads = dict.fromkeys(owners, 0)
+    for w, claimants in view.claims.items():  # one pass (View.load per owner would be one each)
+        if w in view.worlds:
+            for o in claimants:
+                if o in loads:
+                    loads[o] += 1
     loads[me] = len([w for w in held if w in view.worlds])
     least = min(loads.values())
     healthy = {w for w in held - failed if w in view.worlds}
@@ -160,7 +173,7 @@ def plan(
     if loads[me] <= least and shed is None:
         tied = sorted(o for o, n in loads.items() if n == least)
         rank = tied.index(me) if me in tied else len(tied)
-        free = [w for w in sorted(view.worlds) if not view.claimants(w) and w not in mine and w not in avoid]
+        free = sorted(w for w in view.worlds if w not in view.claims and w not in mine and w not in avoid)
         for w in sorted(free, key=lambda w: (w not in known, w)):
             wait = 0.0 if w in known else claim_delay * (1 + rank)
             if unclaimed_for.get(w, 0.0) >= wait:

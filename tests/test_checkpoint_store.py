@@ -140,3 +140,36 @@ def test_a_takeover_from_an_older_copy_says_so_and_numbers_after_the_last_publis
     assert att.values == {"checkpoint_version": 3.0, "last_published_version": 5.0}
     fresh = attach(spec, d.config, d.publish, last_published=7).link
     assert fresh.version == 7 and "versions go on from there" in events[-1].detail
+
+
+def test_the_share_interval_is_a_command_line_option_the_workers_get_too(monkeypatch, capsys):
+    """`sme agent --share-on-embedding S` sets the interval of the share after a new embedding
+    version (default 2 s), for the agent and every worker; a bad value is a usage error."""
+    from sensorimotor.tools import agent_cmd
+    from sensorimotor.tools.cli import build_parser, main
+    from sensorimotor.tools.common import free_port
+
+    assert build_parser().parse_args(["agent"]).share_on_embedding == 2.0
+    for bad in ("-1", "nan"):
+        assert main(["agent", "--share-on-embedding", bad]) == 2
+        assert "--share-on-embedding must be >= 0 seconds" in capsys.readouterr().err
+    args = build_parser().parse_args(["agent", "--share-on-embedding", "0.5"])
+    argv = agent_cmd._worker_argv(args, 1, "tcp/127.0.0.1:7447")
+    assert argv[argv.index("--share-on-embedding") + 1] == "0.5"
+
+    made: list[AgentDaemon] = []
+
+    class Made(Exception):
+        pass
+
+    def capture(*a, **kw):
+        made.append(AgentDaemon(*a, **kw))
+        raise Made
+
+    monkeypatch.setattr(agent_cmd, "AgentDaemon", capture)
+    port = free_port()
+    try:
+        main(["agent", "--workers", "1", "--listen", f"tcp/127.0.0.1:{port}", "--share-on-embedding", "0.5", "-q"])
+    except Made:
+        pass
+    assert made and made[0].schedule is not None and made[0].schedule.min_interval == 0.5

@@ -172,6 +172,30 @@ def test_oversize_claim_is_refused_before_allocation():
         codec.decode(Observation, b"\x00" * (codec.MAX_MESSAGE_BYTES + 1))
 
 
+def test_a_tensor_over_the_limit_is_refused_from_the_wire_format_before_parsing():
+    """33 MiB of tensor data: refused by reading the field lengths (no copy into a message); a
+    legal tensor of exactly the limit in a message as large still decodes."""
+    import time
+
+    n = codec.MAX_TENSOR_BYTES + (1 << 20)
+    p = pb.Observation(schema_version=1, world_id="w", episode=3, step=5, reward=0.5)
+    p.tensors.add(name="ok", dtype="uint8", shape=[4], data=bytes(4))
+    p.tensors.add(name="big", dtype="uint8", shape=[n], data=bytes(n))
+    data = p.SerializeToString()
+    assert codec.oversize_field(data) > codec.MAX_TENSOR_BYTES
+    t0 = time.perf_counter()
+    with pytest.raises(errors.OversizeMessage, match="refused before parsing"):
+        codec.decode(Observation, data)
+    assert time.perf_counter() - t0 < 0.02  # parsing it takes ~55 ms
+    ok = pb.Observation(schema_version=1, world_id="w", episode=1, step=1)
+    ok.tensors.add(name="x", dtype="uint8", shape=[codec.MAX_TENSOR_BYTES], data=bytes(codec.MAX_TENSOR_BYTES))
+    ok.tensors.add(name="y", dtype="uint8", shape=[1 << 20], data=bytes(1 << 20))
+    raw = ok.SerializeToString()
+    assert len(raw) > codec.MAX_TENSOR_BYTES and codec.oversize_field(raw) == 0
+    assert codec.decode(Observation, raw).tensors["x"].nbytes == codec.MAX_TENSOR_BYTES
+    assert codec.oversize_field(b"\xff" * 20) == 0  # not a varint: the parser decides
+
+
 def test_too_many_tensors():
     p = pb.Observation(schema_version=1, world_id="w")
     for i in range(codec.MAX_TENSORS + 1):

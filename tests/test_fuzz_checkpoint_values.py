@@ -4,9 +4,14 @@ never anything else; a small file that would inflate to hundreds of MB is refuse
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import io
+import os
+import tempfile
 import time
 import zipfile
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,13 +23,19 @@ from sensorimotor.agent.checkpoint import (
     MAX_INFLATED_BYTES,
     Checkpoint,
     CheckpointError,
+    _arrays,
+    check_shapes,
     decode_checkpoint,
     encode_checkpoint,
 )
 from sensorimotor.agent.daemon import AgentDaemon
+from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import BusMessage
-from sensorimotor.protocol.messages import ActionSpace, SensorSpec, SharedCheckpoint
+from sensorimotor.protocol.messages import ActionSpace, AgentEvent, SensorSpec, SharedCheckpoint, WorldSpec
+from sensorimotor.protocol.params import as_strings
+from sensorimotor.tools.inprocess import run_inprocess
+from sensorimotor.worlds.gridworld import GridWorld
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -138,3 +149,120 @@ def test_a_shared_checkpoint_for_another_world_is_refused() -> None:
     payload = codec.encode(SharedCheckpoint("g2", encode_checkpoint(_good(world_id="g2")), owner="b"))
     d._on_checkpoint(BusMessage(keys.agent_checkpoint("b", "g1"), payload, ""))
     assert d.store.newest("g1") is None and d.counters["bad_checkpoint"] == 1
+
+
+# checked by shape: arrays that do not fit the world's program are set aside, never loaded -------------
+
+
+class _EventBus:
+    """Stands in for the bus: keeps the events the daemon puts (a set-aside checkpoint is one)."""
+
+    closed = False
+
+    def __init__(self) -> None:
+        self.events: list[AgentEvent] = []
+
+    def put(self, key: str, payload: bytes, schema: str | None = None) -> None:  # noqa: ARG002
+        self.events.append(codec.decode(AgentEvent, payload))
+
+
+@functools.cache
+def _learned_grid() -> tuple[WorldSpec, Checkpoint]:
+    """A gridworld program's real checkpoint after some learning (its spec, and the checkpoint)."""
+    world = GridWorld(seed=0)
+    program = make_program(world.spec(), 0)
+    run_inprocess(world, program, 1000)
+    spec = world.spec()
+    ck = Checkpoint(
+        world_id=spec.world_id,
+        kind=spec.kind,
+        program=spec.program,
+        sensors=tuple(spec.sensors),
+        action_space=spec.action_space,
+        version=2,
+        program_class=type(program).__name__,
+        program_params=as_strings(program.params),
+        program_state=program.state(),
+        saved_at=time.time() - 5,
+        steps=1000,
+    )
+    return spec, ck
+
+
+def _replaced(tree: Any, path: list[str], value: Any) -> Any:
+    """`tree` (dicts and lists) with the item at `path` replaced by `value` (copies along the path)."""
+    if not path:
+        return value
+    head, rest = path[0], path[1:]
+    if isinstance(tree, dict):
+        return {**tree, head: _replaced(tree[head], rest, value)}
+    out = list(tree)
+    out[int(head)] = _replaced(out[int(head)], rest, value)
+    return out
+
+
+def _fixed_arrays() -> list[tuple[str, tuple[int, ...], str]]:
+    """(path, shape, dtype kind) of every array whose shape the program fixes (non-empty when fresh)."""
+    spec, ck = _learned_grid()
+    fresh = make_program(spec, 0, **ck.program_params).state()
+    return [(p, a.shape, a.dtype.kind) for p, a in _arrays(fresh) if a.size]
+
+
+shapes = st.one_of(st.lists(st.integers(0, 12), max_size=3).map(tuple), st.integers(0, 400).map(lambda n: (n,)))
+dtypes = st.sampled_from(["float64", "float32", "int64", "bool"])
+
+
+@FUZZ
+@given(which=st.integers(0, 100), shape=shapes, dtype=dtypes, same=st.booleans(), shared=st.booleans())
+def test_arrays_of_the_wrong_shape_are_set_aside_never_loaded(which, shape, dtype, same, shared) -> None:
+    spec, ck = _learned_grid()
+    fixed = _fixed_arrays()
+    assert fixed, "the gridworld program keeps arrays of a fixed shape (its LSPI weights)"
+    path, want, kind = fixed[which % len(fixed)]
+    if same:
+        shape = want
+    a = np.zeros(shape, dtype=dtype)
+    fits = a.shape == want and a.dtype.kind == kind
+    mutated = dataclasses.replace(ck, program_state=_replaced(ck.program_state, path.split("."), a))
+    data = encode_checkpoint(mutated)
+    bus = _EventBus()
+    with tempfile.TemporaryDirectory() as state_dir:
+        d = AgentDaemon(bus, "a0", state_dir=None if shared else state_dir)  # type: ignore[arg-type]
+        if shared:  # another owner's copy: checked by value when it arrives, by shape when restored
+            payload = codec.encode(SharedCheckpoint(spec.world_id, data, owner="b"))
+            d._on_checkpoint(BusMessage(keys.agent_checkpoint("b", spec.world_id), payload, ""))
+            assert d.store.newest(spec.world_id) is not None
+        else:
+            with open(os.path.join(state_dir, f"{spec.world_id}.ckpt.npz"), "wb") as f:
+                f.write(data)
+        restored = d._load_checkpoint(spec)
+        d.status()  # the agent's status never breaks
+        aside = [f for f in os.listdir(state_dir) if ".ckpt.npz.bad-" in f]
+    if fits:
+        assert restored is not None and d.counters["bad_checkpoint"] == 0
+        got = restored.program.state()
+        assert np.array_equal(np.asarray(_lookup(got, path)), a)
+        return
+    assert restored is None, f"{path} {a.dtype}{list(a.shape)} was loaded into a program that keeps {want}"
+    assert d.counters["bad_checkpoint"] == 1
+    assert [e.reason for e in bus.events] == ["bad_checkpoint"]
+    assert path in bus.events[0].detail  # the reason names the array
+    if shared:
+        assert d.store.newest(spec.world_id) is None  # dropped, never offered again
+    else:
+        assert len(aside) == 1  # set aside as NAME.bad-<time>, never written back
+
+
+def _lookup(tree: Any, path: str) -> Any:
+    for k in path.split("."):
+        tree = tree[k] if isinstance(tree, dict) else tree[int(k)]
+    return tree
+
+
+def test_a_learned_state_of_every_shape_check_fits_its_program() -> None:
+    """The shape check compares with a fresh program's state: what the program learned (growing
+    sample buffers, weights) passes it (every program kind: tests/test_checkpoint.py restores each)."""
+    spec, ck = _learned_grid()
+    check_shapes(ck.program_state, make_program(spec, 0, **ck.program_params).state())
+    with pytest.raises(CheckpointError, match=r"program_state.lspi.w has shape \[3\]"):
+        check_shapes(_replaced(ck.program_state, ["lspi", "w"], np.zeros(3)), make_program(spec, 0).state())

@@ -40,6 +40,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--checkpoint-every", type=float, default=30.0, metavar="S", help="checkpoint period (s)")
     p.add_argument(
+        "--share-on-embedding",
+        type=float,
+        default=2.0,
+        metavar="S",
+        help="while another agent (or worker) is alive, share a world's checkpoint on the bus soon after "
+        "each new embedding version, at most once every S seconds per world (default: 2), so that a "
+        "takeover after a kill -9 resumes from at most ~S s back; 0: after every version; the periodic "
+        "share every --checkpoint-every seconds happens anyway",
+    )
+    p.add_argument(
         "--link-ttl",
         type=float,
         default=600.0,
@@ -139,6 +149,7 @@ def _worker_argv(args: argparse.Namespace, k: int, endpoint: str) -> list[str]:
     argv += ["-v"] * max(0, getattr(args, "verbose", 0) or 0) + (["-q"] if getattr(args, "quiet", False) else [])
     argv += ["agent", "--id", args.id, "--owner-id", f"{args.id}.w{k}", "--workers", "1"]
     argv += ["--seed", str(args.seed), "--checkpoint-every", str(args.checkpoint_every)]
+    argv += ["--share-on-embedding", str(args.share_on_embedding)]
     argv += ["--link-ttl", str(args.link_ttl), "--detector", args.detector, "--claim-settle", str(args.claim_settle)]
     argv += ["--parent-pid", str(os.getpid()), "--mode", "client", "--connect", endpoint]
     if args.state_dir:
@@ -180,6 +191,9 @@ def run_agent(args: argparse.Namespace) -> int:
     if workers < 1:
         print(f"sme agent: --workers must be >= 1, not {args.workers}", file=sys.stderr)
         return 2
+    if not args.share_on_embedding >= 0:  # also refuses nan
+        print(f"sme agent: --share-on-embedding must be >= 0 seconds, not {args.share_on_embedding}", file=sys.stderr)
+        return 2
     if not args.claim_settle >= 0:
         print(f"sme agent: --claim-settle must be >= 0 seconds, not {args.claim_settle}", file=sys.stderr)
         return 2
@@ -213,6 +227,7 @@ def run_agent(args: argparse.Namespace) -> int:
             link_ttl=args.link_ttl,
             owner_id=owner_id,
             claim_settle=args.claim_settle,
+            share_on_embedding=args.share_on_embedding,
             workers=tuple(f"{args.id}.w{k}" for k in range(1, workers)),
             all_obs=args.owner_id is None,  # a worker hears only the worlds it claims
         )

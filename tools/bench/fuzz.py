@@ -93,6 +93,7 @@ class Result:
     baseline_after: float = 0.0  # and in one after the counters settled (the machine's load drifts)
     fuzz_steps_per_s: float = 0.0  # its step rate while the hostile messages were sent
     step_rate_ratio: float = 0.0  # fuzz / baseline (the bar: >= 0.8)
+    settle_seconds: float = 0.0  # seconds after the last message until every one was counted (or the wait gave up)
     handoffs: int = 0  # claims of the good world declared or withdrawn during the fuzz (the bar: 0)
     ownership: dict[str, int] = field(default_factory=dict)  # the owners' shed/lost/taken_over increase
 
@@ -403,7 +404,14 @@ def _wait(pred: Callable[[], Any], timeout: float, every: float = 0.25) -> Any:
 # the run ------------------------------------------------------------------------------------------------
 
 
-def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0, converge: float = 120.0) -> Result:
+def run(
+    messages: int,
+    seed: int = 0,
+    rate: float = 1000.0,
+    settle: float = 60.0,
+    converge: float = 120.0,
+    workers: int | None = None,
+) -> Result:
     """Fuzz an agent with `messages` hostile messages at `rate` per second beside a good gridworld.
 
     Parameters
@@ -418,6 +426,8 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
         Seconds to wait, after the last message, for the counters to reach `sent`.
     converge : float
         Seconds to wait, after that, for the good world's embedding error to drop under 0.05.
+    workers : int or None
+        The agent's `--workers` (None: its default, the number of cores).
 
     Returns
     -------
@@ -426,7 +436,7 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
     """
     ep = f"tcp/127.0.0.1:{free_port()}"
     res = Result()
-    agent = _start("agent", "--listen", ep, "-q")
+    agent = _start("agent", "--listen", ep, "-q", *(() if workers is None else ("--workers", str(workers))))
     agent_log = _Tail(agent.stderr)
     world = _start("world", "gridworld", "--id", GOOD, "--connect", ep, "-q")
     _Tail(world.stderr)
@@ -545,7 +555,9 @@ def run(messages: int, seed: int = 0, rate: float = 1000.0, settle: float = 60.0
                 d = delta()
                 return d if sum(d.get(c, 0) for c in COUNTERS) >= res.sent else None
 
+            s0 = time.perf_counter()
             d = _wait(settled, settle) or delta()
+            res.settle_seconds = round(time.perf_counter() - s0, 1)
             res.counters = {c: d.get(c, 0) for c in COUNTERS}
             res.rejected_kinds = {
                 k.split(".", 1)[1]: v for k, v in sorted(d.items()) if k.startswith("rejected.") and v
