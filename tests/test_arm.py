@@ -230,3 +230,20 @@ def test_proprioception_and_box_actions():
         with pytest.raises(ValueError):
             w.step(np.array([np.nan, 0.0]))
         assert "lspi" in GenericProgram(spec, seed=0).describe()
+
+
+def test_sme_world_arm_exits_2_naming_the_valid_joints(tmp_path):
+    import subprocess
+    import sys
+
+    for param, says in (
+        ("joints=elbow", "valid: lbr_iiwa_joint_1"),
+        (f"urdf={tmp_path / 'own.urdf'}", "neither a file"),
+    ):
+        out = subprocess.run(
+            [sys.executable, "-m", "sensorimotor.tools.cli", "world", "arm", "--param", param],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert out.returncode == 2 and says in out.stderr, out.stderr
