@@ -52,6 +52,7 @@ import scipy.sparse as sp
 from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mode_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
+from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.goal import failed, reached
@@ -60,7 +61,7 @@ from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 from sensorimotor.protocol.params import option, parse
 
-LEARNERS = ("auto", "tabular", "lspi", "sarsa")
+LEARNERS = ("auto", "tabular", "lspi", "sarsa", "planner")
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,14 @@ class GenericProgramParams:
     )
     embed_every: int = option(5000, "Sarsa: learning steps between embedding sweeps", min=1)
     sarsa_warmup: int = option(1000, "Sarsa: random steps first, to measure each value's range for the tiles", min=0)
+    planner_grid: int = option(
+        0, "planner: grid nodes per dimension (0: as many as keep the grid within 4096 nodes)", min=0
+    )
+    planner_every: int = option(250, "planner: transitions between plans (value iteration over the model)", min=1)
+    planner_epsilon: float = option(0.05, "planner: random-action rate while learning", min=0.0, max=1.0)
+    planner_effort: float = option(
+        0.01, "planner: cost per unit of squared action size (the smaller of equally quick actions)", min=0.0
+    )
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     distance: str = option(
         "padded", "box actions: padded sum (Eq 3.1) or dtw between the continuous traces", choices=("padded", "dtw")
@@ -363,6 +372,7 @@ class GenericProgram(Program):
         self._lo, self._span = lo, span
         basis: Any
         self.sarsa: SarsaLambda | None = None
+        self.planner: ModelPlanner | None = None
         if self.tabular:
             if ids:
                 self.low = int(s0.low)
@@ -386,6 +396,23 @@ class GenericProgram(Program):
             basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
             # per-value ranges, measured over the first `sarsa_warmup` random steps: a sensor's one
             # declared range may span values of very different scales (position and velocity)
+            self._seen_lo = np.full(d, np.inf)
+            self._seen_hi = np.full(d, -np.inf)
+            self._warm = 0
+        elif learner == "planner":
+            self.n_states = 0
+            grid = prm.planner_grid or max(2, int(np.floor(4096 ** (1.0 / d) + 1e-9)))
+            self.planner = ModelPlanner(
+                d,
+                self.actions,
+                self.discrete,
+                grid,
+                gamma=prm.sarsa_gamma,
+                epsilon=prm.planner_epsilon,
+                effort=prm.planner_effort,
+                seed=int(self.rng.integers(2**31)),
+            )
+            basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
             self._seen_lo = np.full(d, np.inf)
             self._seen_hi = np.full(d, -np.inf)
             self._warm = 0
@@ -428,6 +455,8 @@ class GenericProgram(Program):
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
+        self._since_plan = 0  # planner: transitions since the last plan started
+        self._fresh = False  # planner: a node met for the first time since the last plan started
         self.use_background(prm.learn_lag)
 
     def describe(self) -> str:
@@ -437,6 +466,8 @@ class GenericProgram(Program):
             "sarsa": f"tile-coded Sarsa(lambda), {self.sarsa.coder.dims if self.sarsa else 0} values"
             + (", hashed tiles" if self.sarsa and self.sarsa.coder.hashed else ""),
             "lspi": "LSPI over PCA + RBF features",
+            "planner": f"a learned local-linear model and interpolated value iteration, "
+            f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes",
         }[self.learner]
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
@@ -507,9 +538,13 @@ class GenericProgram(Program):
         return i
 
     def _weights(self) -> np.ndarray:
+        if self.planner is not None:
+            return self.planner.w
         return self.sarsa.w if self.sarsa is not None else self.lspi.w
 
     def _q(self, obs: Observation, w: np.ndarray | None = None) -> np.ndarray:
+        if self.planner is not None:
+            return self.planner.q(self._vector(obs), w)
         if self.sarsa is not None:
             tiles = self.sarsa.coder.active(self._vector(obs))
             return (self.sarsa.w if w is None else w)[:, tiles].sum(axis=1)
@@ -805,6 +840,46 @@ class GenericProgram(Program):
         self._prev_x, self._prev_key, self._prev = x, key, (0, a2)
         return Decision(tuple(float(v) for v in self.actions[a2]))
 
+    def _model_step(self, obs: Observation, a: int | None) -> None:
+        """The planner records the transition that led to `obs` (from the previous state and action)
+        and remembers this state and the action `a` taken from it (None: the episode ends here);
+        every `planner_every` transitions a new plan is started off the act path."""
+        assert self.planner is not None and self.background is not None
+        x = self._vector(obs)
+        if obs.t > 0 and self._prev_x is not None and self._prev is not None:
+            outcome = "goal" if reached(self.goal, obs) else "failure" if failed(self.goal, obs) else "continue"
+            fresh = self.planner.observe(self._prev_x, self._prev[1], x, outcome)
+            self.new_samples += 1
+            self._since_plan += 1
+            self._fresh = self._fresh or fresh
+            due = self._fresh or self._since_plan >= self.params.planner_every
+            if due and not self.background.pending("plan"):
+                self._fresh = False
+                self._since_plan = 0
+                self.background.submit("plan", plan_job, **self.planner.job_args())
+        self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
+
+    def _learn_planner(self, obs: Observation) -> Decision:
+        """One learning step of the planner: record, plan now and then, act epsilon-greedily."""
+        assert self.planner is not None
+        if obs.t == 0:
+            self._prev_x, self._prev = None, None
+        terminal = obs.t > 0 and self._terminal(obs)
+        a = None if terminal or obs.done else self.planner.act(self._vector(obs))
+        if self._prev_x is not None and self._prev is not None and obs.t > 0 and self._prev_key is not None:
+            self._note_transition(self._prev_key, self._prev[1], obs)
+        self._model_step(obs, a)
+        self._prev_key = self._key(obs) if a is not None else None
+        if self.new_samples >= self.params.embed_every:
+            self.new_samples = 0
+            self.lspi.iterations += 1  # sweeps of the plan count as its iterations
+            if self.spec.n_starts >= 2:
+                return self._start_sweep(check=False)
+            self._no_starts(obs.step)
+        if obs.done or a is None:
+            return Decision(reset=True, start=-1)
+        return Decision(tuple(float(v) for v in self.actions[a]))
+
     def _warmup(self, obs: Observation) -> Decision:
         """A random step that measures the range of every value; at its end the tiles are laid
         over those ranges (widened by a tenth of their span on each side)."""
@@ -821,8 +896,16 @@ class GenericProgram(Program):
 
     def act(self, obs: Observation) -> Decision:
         assert self.background is not None
-        if self.sarsa is not None and self._warm < self.params.sarsa_warmup:
+        continuous = self.sarsa is not None or self.planner is not None
+        if continuous and self._warm < self.params.sarsa_warmup:
             return self._warmup(obs)
+        if self.phase == "explore" and self.planner is not None:
+            for name, result in self.background.tick():
+                if name == "embed":
+                    self._embedded(result)
+                elif name == "plan":
+                    self.planner.install(result)
+            return self._learn_planner(obs)
         if self.phase == "explore" and self.sarsa is not None:
             for name, result in self.background.tick():
                 if name == "embed":
@@ -845,6 +928,8 @@ class GenericProgram(Program):
             elif name == "lspi":
                 self._iterated(result, obs.step)
                 iterated = True
+            elif name == "plan" and self.planner is not None:
+                self.planner.install(result)
         if self.phase == "explore":
             assert s is not None
             if iterated and self.spec.n_starts >= 2:
@@ -890,6 +975,8 @@ class GenericProgram(Program):
             self._diverged = False
         if self.sarsa is not None and not self._checking and self.params.epsilon == 0.0:
             self._learn_in_sweep(obs, None if dec.reset else int(dec.values[0]))
+        if self.planner is not None:  # a model learns from every transition, whoever chose it
+            self._model_step(obs, None if dec.reset else int(dec.values[0]))
         if not dec.reset:
             dec = Decision(tuple(float(v) for v in self.actions[int(dec.values[0])]))
         if self._sweep.finished:
@@ -907,7 +994,10 @@ class GenericProgram(Program):
         self.lspi.reset()
         if self.sarsa is not None:
             self.sarsa.reset()
+        if self.planner is not None:
+            self.planner.reset()
         assert self.background is not None
+        self.background.discard("plan")
         self.background.discard("lspi")  # an iteration over the dropped samples is never swapped in
         self.new_samples = 0
         self._prev, self._prev_x, self._prev_key = None, None, None
@@ -960,6 +1050,10 @@ class GenericProgram(Program):
             "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
             "unfed": list(self._unfed),
         }
+        if self.planner is not None:
+            out["planner"] = self.planner.state()
+            out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
+            out.update(lo=self._lo.copy(), span=self._span.copy())
         if self.sarsa is not None:
             out["sarsa"] = self.sarsa.state()
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
@@ -1004,6 +1098,13 @@ class GenericProgram(Program):
         at = state.get("accepted_traces")
         self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
         self._unfed = [float(v) for v in state.get("unfed", [])]
+        if self.planner is not None:
+            self.planner.restore(state["planner"])
+            self._warm = int(state["warm"])
+            self._seen_lo = np.asarray(state["seen_lo"], dtype=np.float64)
+            self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
+            self._lo = np.asarray(state["lo"], dtype=np.float64)
+            self._span = np.asarray(state["span"], dtype=np.float64)
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
             self._warm = int(state["warm"])
