@@ -59,7 +59,6 @@ def plan_job(
     action) `pg`, `pf`, `V` (the values before the goal discount, to warm-start the next plan) and
     the iterations done."""
     n_nodes, p, d = B.shape
-    na = features.shape[0]
     eye = np.eye(p)
     Wg = np.linalg.solve(A.sum(axis=0) + ridge * eye, B.sum(axis=0))  # one fit of all samples: the prior
     W = np.linalg.solve(A + ridge * eye[None], B + ridge * Wg[None])  # per node, shrunk toward the prior
@@ -266,7 +265,21 @@ class ModelPlanner:
 
     # saved state -----------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
-        names = ("A", "B", "visits", "goals", "fails", "landed", "landed_goal", "U", "W", "pg", "pf", "known", "plan_known")
+        names = (
+            "A",
+            "B",
+            "visits",
+            "goals",
+            "fails",
+            "landed",
+            "landed_goal",
+            "U",
+            "W",
+            "pg",
+            "pf",
+            "known",
+            "plan_known",
+        )
         out: dict[str, Any] = {k: getattr(self, k).copy() for k in names}
         out.update(V=None if self.V is None else self.V.copy(), samples=self.samples, plans=self.plans)
         out["rng"] = rng_state(self.rng)
