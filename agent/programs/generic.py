@@ -16,6 +16,13 @@ The learner follows the observation (`learner=auto`; the attach event says which
 * ``sarsa`` - a continuous observation of at most `sarsa_max_dims` values: tile-coded Sarsa(lambda)
   with optimistic initial values (the classic mountain-car recipe, ch. 8's CMAC; hashed tiles above
   `memory`), which explores toward sparse goals by itself.
+* ``planner`` - a continuous observation of at most `planner_max_dims` values and a box action of
+  two or more dimensions (whose discretised table is a product of moves: 27 for three): a model of
+  each action's effect, linear in the action and fitted per node of a grid over the observation,
+  and value iteration over that grid with the value interpolated between nodes, optimistic about
+  nodes never met (`agent.learners.model_planner`). The model generalises across the actions a
+  model-free learner would have to try one by one, and its plan is the shortest way under the
+  model (the smaller of equally quick moves), so traces are a function of the start.
 * ``lspi`` - anything else (images, long vectors): flattened, scaled by the sensors' ranges,
   randomly projected to at most `projection` dimensions, reduced by PCA fitted on a reservoir
   sample, fed through Gaussian radial basis functions (ch. 6: PCA + RBF), LSPI over random samples.
@@ -110,6 +117,9 @@ class GenericProgramParams:
     )
     embed_every: int = option(5000, "Sarsa: learning steps between embedding sweeps", min=1)
     sarsa_warmup: int = option(1000, "Sarsa: random steps first, to measure each value's range for the tiles", min=0)
+    planner_max_dims: int = option(
+        4, "learner=auto: continuous observations of at most this many values with box actions of 2+ dims plan", min=1
+    )
     planner_grid: int = option(
         0, "planner: grid nodes per dimension (0: as many as keep the grid within 4096 nodes)", min=0
     )
@@ -358,7 +368,16 @@ class GenericProgram(Program):
         d = sum(int(np.prod(s.shape)) for s in spec.sensors)
         learner = prm.learner
         if learner == "auto":
-            learner = "tabular" if ids or symbols else "sarsa" if d <= prm.sarsa_max_dims else "lspi"
+            box = not spec.action_space.discrete and len(spec.action_space.low) >= 2
+            learner = (
+                "tabular"
+                if ids or symbols
+                else "planner"
+                if box and d <= prm.planner_max_dims
+                else "sarsa"
+                if d <= prm.sarsa_max_dims
+                else "lspi"
+            )
         self.learner = learner
         self.tabular = learner == "tabular"
         self.keyed = self.tabular and not ids  # a table of distinct observations, not given state ids
@@ -456,6 +475,8 @@ class GenericProgram(Program):
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
         self._since_plan = 0  # planner: transitions since the last plan started
+        self._start_lo = np.full(d, np.inf)  # the range of start observations met while warming up
+        self._start_hi = np.full(d, -np.inf)
         self._fresh = False  # planner: a node met for the first time since the last plan started
         self.use_background(prm.learn_lag)
 
@@ -885,11 +906,22 @@ class GenericProgram(Program):
         over those ranges (widened by a tenth of their span on each side)."""
         x = self._flat(obs)
         self._seen_lo, self._seen_hi = np.minimum(self._seen_lo, x), np.maximum(self._seen_hi, x)
+        if obs.t == 0:
+            self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
         self._warm += 1
         if self._warm >= self.params.sarsa_warmup:
             lo, hi = self._seen_lo, self._seen_hi
             span = np.where(hi > lo, hi - lo, 1.0)
             self._lo, self._span = lo - 0.1 * span, 1.2 * span
+            if self.planner is not None:
+                # the planner's grid is spent where traces run: over the span of the start states
+                # met, widened by half of it on each side (random walks wander far wider); a value
+                # the starts do not vary keeps the range the walks showed
+                s_lo, s_hi = self._start_lo, self._start_hi
+                s_span = s_hi - s_lo
+                wide = np.isfinite(s_span) & (s_span > 1e-6 * np.maximum(span, 1e-12))
+                self._lo = np.where(wide, s_lo - 0.5 * s_span, self._lo)
+                self._span = np.where(wide, 2.0 * s_span, self._span)
         if obs.done:
             return Decision(reset=True, start=-1)
         return Decision(tuple(float(v) for v in self.actions[int(self.rng.integers(self.n_actions))]))
@@ -1052,6 +1084,7 @@ class GenericProgram(Program):
         }
         if self.planner is not None:
             out["planner"] = self.planner.state()
+            out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy())
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
             out.update(lo=self._lo.copy(), span=self._span.copy())
         if self.sarsa is not None:
@@ -1100,6 +1133,8 @@ class GenericProgram(Program):
         self._unfed = [float(v) for v in state.get("unfed", [])]
         if self.planner is not None:
             self.planner.restore(state["planner"])
+            self._start_lo = np.asarray(state["start_lo"], dtype=np.float64)
+            self._start_hi = np.asarray(state["start_hi"], dtype=np.float64)
             self._warm = int(state["warm"])
             self._seen_lo = np.asarray(state["seen_lo"], dtype=np.float64)
             self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
