@@ -50,6 +50,7 @@ def plan_job(
     ridge: float,
     effort: np.ndarray,
     value: np.ndarray | None,
+    exploit: np.ndarray | None = None,
     max_iterations: int = 300,
 ) -> dict[str, Any]:
     """Fit the model and run value iteration (a pure function, run off the act path).
@@ -70,19 +71,36 @@ def plan_job(
     s = landed_goal / np.maximum(landed, 1)
     known = landed + visits.sum(axis=1) > 0
     v_fail = 1.0 / (1.0 - gamma)
-    V = np.zeros(n_nodes) if value is None else np.array(value, dtype=np.float64)
     go_on = np.clip(1.0 - pg - pf, 0.0, 1.0)
-    done = 0
-    for done in range(1, max_iterations + 1):  # noqa: B007 - the count is returned
-        U = np.where(known, (1.0 - s) * V, 0.0)  # never seen: optimistic (R-max)
-        Q = effort[None, :] + 1.0 + gamma * (go_on * (wts * U[idx]).sum(axis=2) + pf * v_fail)
-        Vn = np.where(known, Q.min(axis=1), 0.0)
-        change = float(np.abs(Vn - V).max())
-        V = Vn
-        if change < 1e-4:
-            break
-    U = np.where(known, (1.0 - s) * V, 0.0)
-    return {"U": U, "W": W, "pg": pg, "pf": pf, "V": V, "known": known, "iterations": done}
+
+    def iterate(V: np.ndarray, unknown: float) -> tuple[np.ndarray, np.ndarray, int]:
+        done = 0
+        for done in range(1, max_iterations + 1):  # noqa: B007 - the count is returned
+            U = np.where(known, (1.0 - s) * V, unknown)
+            Q = effort[None, :] + 1.0 + gamma * (go_on * (wts * U[idx]).sum(axis=2) + pf * v_fail)
+            Vn = np.where(known, Q.min(axis=1), unknown)
+            change = float(np.abs(Vn - V).max())
+            V = Vn
+            if change < 1e-4:
+                break
+        return V, np.where(known, (1.0 - s) * V, unknown), done
+
+    # learning: nodes never met cost nothing (R-max: the plan goes to find out); the policy that is
+    # swept and embedded: they cost as much as never arriving (it keeps to what it knows)
+    V, U, done = iterate(np.zeros(n_nodes) if value is None else np.array(value, dtype=np.float64), 0.0)
+    start = np.full(n_nodes, v_fail) if exploit is None else np.array(exploit, dtype=np.float64)
+    Ve, Ue, done_e = iterate(start, v_fail)
+    return {
+        "U": U,
+        "Ue": Ue,
+        "W": W,
+        "pg": pg,
+        "pf": pf,
+        "V": V,
+        "Ve": Ve,
+        "known": known,
+        "iterations": done + done_e,
+    }
 
 
 def node_points(grid: int, d: int) -> np.ndarray:
@@ -177,7 +195,9 @@ class ModelPlanner:
         self.known = np.zeros(n, dtype=bool)  # nodes with experience (R-max: the others are optimistic)
         self.plan_known = np.zeros(n, dtype=bool)  # the same when the installed plan was made
         self.U = np.zeros(n)
+        self.Ue = np.zeros(n)  # the same without optimism: the policy that is swept
         self.V: np.ndarray | None = None
+        self.Ve: np.ndarray | None = None
         self.W = np.zeros((n, p, self.dims))
         self.pg = np.zeros((n, self.n_actions))
         self.pf = np.zeros((n, self.n_actions))
@@ -220,6 +240,7 @@ class ModelPlanner:
             "ridge": self.ridge,
             "effort": self.effort,
             "value": None if self.V is None else self.V.copy(),
+            "exploit": None if self.Ve is None else self.Ve.copy(),
         }
 
     def install(self, plan: dict[str, Any]) -> None:
@@ -227,13 +248,15 @@ class ModelPlanner:
         self.U, self.W = np.asarray(plan["U"]), np.asarray(plan["W"])
         self.pg, self.pf, self.V = np.asarray(plan["pg"]), np.asarray(plan["pf"]), np.asarray(plan["V"])
         self.plan_known = np.asarray(plan["known"], dtype=bool)
+        self.Ue, self.Ve = np.asarray(plan["Ue"]), np.asarray(plan["Ve"])
         self.plans += 1
 
     # the policy ------------------------------------------------------------------------------
     @property
     def w(self) -> np.ndarray:
-        """The plan as one flat array (the program keeps copies of accepted policies)."""
-        return np.concatenate([self.U.ravel(), self.W.ravel(), self.pg.ravel(), self.pf.ravel()])
+        """The plan without optimism as one flat array: the policy the program sweeps, embeds and
+        keeps copies of (accepted policies)."""
+        return np.concatenate([self.Ue.ravel(), self.W.ravel(), self.pg.ravel(), self.pf.ravel()])
 
     def _unpack(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         n, na, p, d = self.n_nodes, self.n_actions, self.features.shape[1], self.dims
@@ -274,6 +297,7 @@ class ModelPlanner:
             "landed",
             "landed_goal",
             "U",
+            "Ue",
             "W",
             "pg",
             "pf",
@@ -282,15 +306,17 @@ class ModelPlanner:
         )
         out: dict[str, Any] = {k: getattr(self, k).copy() for k in names}
         out.update(V=None if self.V is None else self.V.copy(), samples=self.samples, plans=self.plans)
+        out["Ve"] = None if self.Ve is None else self.Ve.copy()
         out["rng"] = rng_state(self.rng)
         return out
 
     def restore(self, state: dict[str, Any]) -> None:
-        for k in ("A", "B", "visits", "goals", "fails", "landed", "landed_goal", "U", "W", "pg", "pf"):
+        for k in ("A", "B", "visits", "goals", "fails", "landed", "landed_goal", "U", "Ue", "W", "pg", "pf"):
             setattr(self, k, np.array(state[k], dtype=np.float64))
         self.known = np.array(state["known"], dtype=bool)
         self.plan_known = np.array(state["plan_known"], dtype=bool)
         self.V = None if state.get("V") is None else np.array(state["V"], dtype=np.float64)
+        self.Ve = None if state.get("Ve") is None else np.array(state["Ve"], dtype=np.float64)
         self.samples, self.plans = int(state["samples"]), int(state["plans"])
         set_rng_state(self.rng, state["rng"])
 
