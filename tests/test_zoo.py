@@ -4,9 +4,8 @@ subclasses by path and by entry point, and `sme bench zoo`."""
 
 from __future__ import annotations
 
-import itertools
-
 import importlib.util
+import itertools
 import sys
 import textwrap
 

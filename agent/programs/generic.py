@@ -121,7 +121,7 @@ class GenericProgramParams:
         4, "learner=auto: continuous observations of at most this many values with box actions of 2+ dims plan", min=1
     )
     planner_grid: int = option(
-        0, "planner: grid nodes per dimension (0: as many as keep the grid within 4096 nodes)", min=0
+        0, "planner: grid nodes per dimension (0: 16, fewer when 16 per value would pass 4096 nodes)", min=0
     )
     planner_every: int = option(250, "planner: transitions between plans (value iteration over the model)", min=1)
     planner_epsilon: float = option(0.05, "planner: random-action rate while learning", min=0.0, max=1.0)
@@ -420,7 +420,7 @@ class GenericProgram(Program):
             self._warm = 0
         elif learner == "planner":
             self.n_states = 0
-            grid = prm.planner_grid or max(2, int(np.floor(4096 ** (1.0 / d) + 1e-9)))
+            grid = prm.planner_grid or max(2, min(16, int(np.floor(4096 ** (1.0 / d) + 1e-9))))
             self.planner = ModelPlanner(
                 d,
                 self.actions,
