@@ -126,3 +126,17 @@ def test_the_generic_program_plans_a_box_action_world_and_embeds_its_lattice():
     assert all(e.metrics["goal_reached_fraction"] == 1.0 for e in embs)
     assert max(e.procrustes_error for e in embs) < 0.05, [e.procrustes_error for e in embs]
     assert not run.events("drop_detected")
+
+
+def test_net_distance_compares_where_box_traces_add_up_to_not_their_order():
+    from sensorimotor.agent.programs.generic import embed_job
+
+    table = ACTIONS  # rows 2 and 6: (-1, 1) and (1, -1)
+    a = [[2, 6]]  # two moves in one order
+    b = [[6, 2]]  # the same moves in the other
+    c = [[2, 2]]
+    out = embed_job([a, b, c], table, 2, distance="net")
+    d = np.linalg.norm(out["coordinates"][:, None] - out["coordinates"][None], axis=2)
+    assert d[0, 1] < 1e-6 and abs(d[0, 2] - np.linalg.norm(table[6] - table[2])) < 1e-6
+    padded = embed_job([a, b, c], table, 2)
+    assert np.linalg.norm(padded["coordinates"][0] - padded["coordinates"][1]) > 0.1

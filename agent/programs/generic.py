@@ -29,8 +29,9 @@ The learner follows the observation (`learner=auto`; the attach event says which
 
 Box action spaces are discretised into `action_levels` values per dimension; their traces are the
 continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time warping
-(`distance=dtw`, with a cost per repeated step so trace length stays in it). Discrete traces are
-compared with the edit distance.
+(`distance=dtw`, with a cost per repeated step so trace length stays in it), or by the distance
+between their sums (`distance=net`: the net move commanded, blind to the order of the moves, for
+bodies whose moves add up). Discrete traces are compared with the edit distance.
 
 A world whose transitions are seen to be stochastic (the same observation and action led to
 different observations) is embedded from `samples` traces per start state with the ch. 9.4
@@ -130,7 +131,10 @@ class GenericProgramParams:
     )
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     distance: str = option(
-        "padded", "box actions: padded sum (Eq 3.1) or dtw between the continuous traces", choices=("padded", "dtw")
+        "padded",
+        "box actions: padded sum (Eq 3.1) or dtw between the continuous traces, or net: the distance "
+        "between their sums (the net move commanded, for bodies whose moves add up, such as a hand)",
+        choices=("padded", "dtw", "net"),
     )
     dtw_penalty: float = option(
         1.0, "distance=dtw: cost of each repeated step (keeps trace length in the distance)", min=0.0
@@ -321,6 +325,9 @@ def embed_job(
             cont = [table[np.asarray(t, dtype=np.int64)].reshape(len(t), table.shape[1]) for t in canon]
             if distance == "dtw":
                 D = trace_distances(cont, kind="dtw", dtw_penalty=dtw_penalty)
+            elif distance == "net":  # the order of the moves does not count, only where they add up to
+                net = np.array([c.sum(axis=0) for c in cont])
+                D = np.linalg.norm(net[:, None, :] - net[None, :, :], axis=2)
             else:
                 D = trace_distances(cont, kind="continuous")
     mds = classical_mds(D, dims)
