@@ -140,3 +140,24 @@ def test_net_distance_compares_where_box_traces_add_up_to_not_their_order():
     assert d[0, 1] < 1e-6 and abs(d[0, 2] - np.linalg.norm(table[6] - table[2])) < 1e-6
     padded = embed_job([a, b, c], table, 2)
     assert np.linalg.norm(padded["coordinates"][0] - padded["coordinates"][1]) > 0.1
+
+
+def test_the_generic_program_saves_and_restores_its_planner():
+    lattice = [tuple(p) for p in itertools.product((0.2, 0.5, 0.8), repeat=2)]
+    if "planner-test/PointMass3-v0" not in gym.envs.registry:
+        gym.register(
+            "planner-test/PointMass3-v0",
+            entry_point=lambda: EmbeddableEnv(PointMass(), lattice, _place, np.array(lattice)),
+            max_episode_steps=40,
+        )
+    with make_world("gym:planner-test/PointMass3-v0", "pm3", 1) as w:
+        spec = w.spec()
+        a = make_program(spec, 1, embed_every=700, sarsa_warmup=200)
+        run_inprocess(w, a, 1_200)
+    b = make_program(spec, 1, embed_every=700, sarsa_warmup=200)
+    b.restore(a.state())
+    assert b.planner is not None and a.planner is not None
+    assert b.planner.samples == a.planner.samples > 0 and np.array_equal(b.planner.w, a.planner.w)
+    assert np.array_equal(b._lo, a._lo) and np.array_equal(b._span, a._span)
+    x = np.array([0.3, 0.6])
+    assert np.array_equal(b.planner.q(x), a.planner.q(x))

@@ -1098,7 +1098,7 @@ class GenericProgram(Program):
             out["sarsa"] = self.sarsa.state()
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
             out.update(lo=self._lo.copy(), span=self._span.copy())
-        elif not self.tabular:
+        elif self.learner == "lspi":
             out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=_basis_state(self._rbf))
         return out
 
@@ -1154,7 +1154,7 @@ class GenericProgram(Program):
             self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
             self._lo = np.asarray(state["lo"], dtype=np.float64)
             self._span = np.asarray(state["span"], dtype=np.float64)
-        elif not self.tabular:
+        elif self.learner == "lspi":
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
             _set_basis(self._rbf, state["basis"])
