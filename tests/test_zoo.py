@@ -5,6 +5,7 @@ subclasses by path and by entry point, and `sme bench zoo`."""
 from __future__ import annotations
 
 import importlib.util
+import itertools
 import sys
 import textwrap
 
@@ -97,7 +98,19 @@ def test_panda_reach_holds_its_target_and_starts_on_a_lattice_of_hand_positions(
         assert spec.params["truth_dims"] == "3" and [s.name for s in spec.sensors] == ["position"]
         r = w.reset(start=5)
         assert np.allclose(r.tensors["position"], truth[5], atol=0.02)  # the hand is where the truth says
-        assert make_program(spec, 0).learner == "sarsa"
+        # a 30 cm cube of 4 x 4 x 4 hand positions centred on the target, its lowest layer 5 cm
+        # above the table (a hand resting on it moves by contact, which pybullet does not repeat)
+        lattice = np.array(list(itertools.product([-0.15, -0.05, 0.05, 0.15], repeat=3))) + [0.0, 0.0, 0.2]
+        assert np.abs(truth - lattice).max() < 0.015
+        assert "target held at its centre [0.0, 0.0, 0.2]" in spec.params["start_states"]
+        # the same start and action give the same next observation, bit for bit (not "stochastic")
+        nxt = []
+        for _ in range(2):
+            w.reset(start=0)
+            nxt.append(w.step(np.array([0.0, 0.0, 0.0])).tensors["position"].tobytes())
+        assert nxt[0] == nxt[1]
+        # box actions of three dimensions over a 3-value hand position: the model-based planner
+        assert make_program(spec, 0).learner == "planner"
 
 
 def test_module_prefix_imports_the_package_and_unknown_modules_are_clear():

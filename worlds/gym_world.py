@@ -604,19 +604,29 @@ class GymWorld(World):
         )
 
     def _panda_starts(self) -> str:
+        """A cube lattice of hand positions as wide as the task's goal range, centred on the held
+        target and lifted so that its lowest layer clears the table by the reach tolerance (a hand
+        resting on the table moves by contact, which pybullet does not repeat exactly)."""
         u: Any = self.u
         lo, hi = np.asarray(u.task.goal_range_low, float), np.asarray(u.task.goal_range_high, float)
-        self._goal = (lo + hi) / 2
+        clearance = float(getattr(u.task, "distance_threshold", 0.05))
+        side = hi - lo
+        centre = (lo + hi) / 2
+        centre[2] = lo[2] + clearance + side[2] / 2
+        self._goal = centre
         n = min(self.params.start_grid, 4)
-        axes = [np.linspace(a, b, n) for a, b in zip(lo, hi, strict=True)]
+        axes = [np.linspace(c - s / 2, c + s / 2, n) for c, s in zip(centre, side, strict=True)]
         points = [np.array(p) for p in itertools.product(*axes)]
         down = np.array([1.0, 0.0, 0.0, 0.0])  # the hand orientation panda-gym's hand control keeps
         angles = []
         truth = []
         for p in points:
             u.reset(seed=self.seed)
-            q = u.robot.inverse_kinematics(link=u.robot.ee_link, position=p, orientation=down)
-            u.robot.set_joint_angles(q)
+            for _ in range(8):  # pybullet's IK is one linearisation: repeat it from where it got to
+                q = u.robot.inverse_kinematics(link=u.robot.ee_link, position=p, orientation=down)
+                u.robot.set_joint_angles(q)
+                if np.linalg.norm(u.robot.get_ee_position() - p) < 1e-3:
+                    break
             angles.append(np.asarray(q, dtype=np.float64))
             truth.append(np.asarray(u.robot.get_ee_position(), dtype=np.float64))
         self._starts = angles
@@ -629,7 +639,10 @@ class GymWorld(World):
             return u._get_obs()
 
         self._set_start = set_state
-        return f"{len(points)} hand positions on a {n}x{n}x{n} lattice (inverse kinematics), target held at {np.round(self._goal, 3).tolist()}"
+        return (
+            f"{len(points)} hand positions on a {n}x{n}x{n} lattice (inverse kinematics), "
+            f"target held at its centre {np.round(self._goal, 3).tolist()}"
+        )
 
     def _grid_starts(self, grid: StateGrid) -> str:
         n = self.params.start_grid

@@ -16,14 +16,22 @@ The learner follows the observation (`learner=auto`; the attach event says which
 * ``sarsa`` - a continuous observation of at most `sarsa_max_dims` values: tile-coded Sarsa(lambda)
   with optimistic initial values (the classic mountain-car recipe, ch. 8's CMAC; hashed tiles above
   `memory`), which explores toward sparse goals by itself.
+* ``planner`` - a continuous observation of at most `planner_max_dims` values and a box action of
+  two or more dimensions (whose discretised table is a product of moves: 27 for three): a model of
+  each action's effect, linear in the action and fitted per node of a grid over the observation,
+  and value iteration over that grid with the value interpolated between nodes, optimistic about
+  nodes never met (`agent.learners.model_planner`). The model generalises across the actions a
+  model-free learner would have to try one by one, and its plan is the shortest way under the
+  model (the smaller of equally quick moves), so traces are a function of the start.
 * ``lspi`` - anything else (images, long vectors): flattened, scaled by the sensors' ranges,
   randomly projected to at most `projection` dimensions, reduced by PCA fitted on a reservoir
   sample, fed through Gaussian radial basis functions (ch. 6: PCA + RBF), LSPI over random samples.
 
 Box action spaces are discretised into `action_levels` values per dimension; their traces are the
 continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time warping
-(`distance=dtw`, with a cost per repeated step so trace length stays in it). Discrete traces are
-compared with the edit distance.
+(`distance=dtw`, with a cost per repeated step so trace length stays in it), or by the distance
+between their sums (`distance=net`: the net move commanded, blind to the order of the moves, for
+bodies whose moves add up). Discrete traces are compared with the edit distance.
 
 Egocentric actions: the tabular learner finds which actions are rotations (repeated, they come
 back to where they started) and compares traces in the frame of their start
@@ -62,6 +70,7 @@ from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
 from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
+from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.goal import failed, reached
@@ -70,7 +79,7 @@ from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 from sensorimotor.protocol.params import option, parse
 
-LEARNERS = ("auto", "tabular", "lspi", "sarsa")
+LEARNERS = ("auto", "tabular", "lspi", "sarsa", "planner")
 
 
 @dataclass(frozen=True)
@@ -119,9 +128,23 @@ class GenericProgramParams:
     )
     embed_every: int = option(5000, "Sarsa: learning steps between embedding sweeps", min=1)
     sarsa_warmup: int = option(1000, "Sarsa: random steps first, to measure each value's range for the tiles", min=0)
+    planner_max_dims: int = option(
+        4, "learner=auto: continuous observations of at most this many values with box actions of 2+ dims plan", min=1
+    )
+    planner_grid: int = option(
+        0, "planner: grid nodes per dimension (0: 16, fewer when 16 per value would pass 4096 nodes)", min=0
+    )
+    planner_every: int = option(250, "planner: transitions between plans (value iteration over the model)", min=1)
+    planner_epsilon: float = option(0.05, "planner: random-action rate while learning", min=0.0, max=1.0)
+    planner_effort: float = option(
+        0.01, "planner: cost per unit of squared action size (the smaller of equally quick actions)", min=0.0
+    )
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     distance: str = option(
-        "padded", "box actions: padded sum (Eq 3.1) or dtw between the continuous traces", choices=("padded", "dtw")
+        "padded",
+        "box actions: padded sum (Eq 3.1) or dtw between the continuous traces, or net: the distance "
+        "between their sums (the net move commanded, for bodies whose moves add up, such as a hand)",
+        choices=("padded", "dtw", "net"),
     )
     dtw_penalty: float = option(
         1.0, "distance=dtw: cost of each repeated step (keeps trace length in the distance)", min=0.0
@@ -346,6 +369,9 @@ def embed_job(
             cont = [table[np.asarray(t, dtype=np.int64)].reshape(len(t), table.shape[1]) for t in canon]
             if distance == "dtw":
                 D = trace_distances(cont, kind="dtw", dtw_penalty=dtw_penalty)
+            elif distance == "net":  # the order of the moves does not count, only where they add up to
+                net = np.array([c.sum(axis=0) for c in cont])
+                D = np.linalg.norm(net[:, None, :] - net[None, :, :], axis=2)
             else:
                 D = trace_distances(cont, kind="continuous")
     mds = classical_mds(D, dims)
@@ -393,7 +419,16 @@ class GenericProgram(Program):
         d = sum(int(np.prod(s.shape)) for s in spec.sensors)
         learner = prm.learner
         if learner == "auto":
-            learner = "tabular" if ids or symbols else "sarsa" if d <= prm.sarsa_max_dims else "lspi"
+            box = not spec.action_space.discrete and len(spec.action_space.low) >= 2
+            learner = (
+                "tabular"
+                if ids or symbols
+                else "planner"
+                if box and d <= prm.planner_max_dims
+                else "sarsa"
+                if d <= prm.sarsa_max_dims
+                else "lspi"
+            )
         self.learner = learner
         self.tabular = learner == "tabular"
         self.keyed = self.tabular and not ids  # a table of distinct observations, not given state ids
@@ -408,6 +443,7 @@ class GenericProgram(Program):
         self._lo, self._span = lo, span
         basis: Any
         self.sarsa: SarsaLambda | None = None
+        self.planner: ModelPlanner | None = None
         if self.tabular:
             if ids:
                 self.low = int(s0.low)
@@ -431,6 +467,23 @@ class GenericProgram(Program):
             basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
             # per-value ranges, measured over the first `sarsa_warmup` random steps: a sensor's one
             # declared range may span values of very different scales (position and velocity)
+            self._seen_lo = np.full(d, np.inf)
+            self._seen_hi = np.full(d, -np.inf)
+            self._warm = 0
+        elif learner == "planner":
+            self.n_states = 0
+            grid = prm.planner_grid or max(2, min(16, int(np.floor(4096 ** (1.0 / d) + 1e-9))))
+            self.planner = ModelPlanner(
+                d,
+                self.actions,
+                self.discrete,
+                grid,
+                gamma=prm.sarsa_gamma,
+                epsilon=prm.planner_epsilon,
+                effort=prm.planner_effort,
+                seed=int(self.rng.integers(2**31)),
+            )
+            basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
             self._seen_lo = np.full(d, np.inf)
             self._seen_hi = np.full(d, -np.inf)
             self._warm = 0
@@ -478,6 +531,10 @@ class GenericProgram(Program):
         self._start_fair = True  # all of them came from the accepted policy's choices
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
+        self._since_plan = 0  # planner: transitions since the last plan started
+        self._start_lo = np.full(d, np.inf)  # the range of start observations met while warming up
+        self._start_hi = np.full(d, -np.inf)
+        self._fresh = False  # planner: a node met for the first time since the last plan started
         self.use_background(prm.learn_lag)
 
     @property
@@ -500,6 +557,8 @@ class GenericProgram(Program):
             "sarsa": f"tile-coded Sarsa(lambda), {self.sarsa.coder.dims if self.sarsa else 0} values"
             + (", hashed tiles" if self.sarsa and self.sarsa.coder.hashed else ""),
             "lspi": "LSPI over PCA + RBF features",
+            "planner": f"a learned local-linear model and interpolated value iteration, "
+            f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes",
         }[self.learner]
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
@@ -570,9 +629,13 @@ class GenericProgram(Program):
         return i
 
     def _weights(self) -> np.ndarray:
+        if self.planner is not None:
+            return self.planner.w
         return self.sarsa.w if self.sarsa is not None else self.lspi.w
 
     def _q(self, obs: Observation, w: np.ndarray | None = None) -> np.ndarray:
+        if self.planner is not None:
+            return self.planner.q(self._vector(obs), w)
         if self.sarsa is not None:
             tiles = self.sarsa.coder.active(self._vector(obs))
             return (self.sarsa.w if w is None else w)[:, tiles].sum(axis=1)
@@ -948,24 +1011,83 @@ class GenericProgram(Program):
         self._prev_x, self._prev_key, self._prev = x, key, (0, a2)
         return Decision(tuple(float(v) for v in self.actions[a2]))
 
+    def _model_step(self, obs: Observation, a: int | None) -> None:
+        """The planner records the transition that led to `obs` (from the previous state and action)
+        and remembers this state and the action `a` taken from it (None: the episode ends here);
+        every `planner_every` transitions a new plan is started off the act path."""
+        assert self.planner is not None and self.background is not None
+        x = self._vector(obs)
+        if obs.t > 0 and self._prev_x is not None and self._prev is not None:
+            outcome = "goal" if reached(self.goal, obs) else "failure" if failed(self.goal, obs) else "continue"
+            fresh = self.planner.observe(self._prev_x, self._prev[1], x, outcome)
+            self.new_samples += 1
+            self._since_plan += 1
+            self._fresh = self._fresh or fresh
+            due = self._fresh or self._since_plan >= self.params.planner_every
+            if due and not self.background.pending("plan"):
+                self._fresh = False
+                self._since_plan = 0
+                self.background.submit("plan", plan_job, **self.planner.job_args())
+        self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
+
+    def _learn_planner(self, obs: Observation) -> Decision:
+        """One learning step of the planner: record, plan now and then, act epsilon-greedily."""
+        assert self.planner is not None
+        if obs.t == 0:
+            self._prev_x, self._prev = None, None
+        terminal = obs.t > 0 and self._terminal(obs)
+        a = None if terminal or obs.done else self.planner.act(self._vector(obs))
+        if self._prev_x is not None and self._prev is not None and obs.t > 0 and self._prev_key is not None:
+            self._note_transition(self._prev_key, self._prev[1], obs)
+        self._model_step(obs, a)
+        self._prev_key = self._key(obs) if a is not None else None
+        if self.new_samples >= self.params.embed_every:
+            self.new_samples = 0
+            self.lspi.iterations += 1  # sweeps of the plan count as its iterations
+            if self.spec.n_starts >= 2:
+                return self._start_sweep(check=False)
+            self._no_starts(obs.step)
+        if obs.done or a is None:
+            return Decision(reset=True, start=-1)
+        return Decision(tuple(float(v) for v in self.actions[a]))
+
     def _warmup(self, obs: Observation) -> Decision:
         """A random step that measures the range of every value; at its end the tiles are laid
         over those ranges (widened by a tenth of their span on each side)."""
         x = self._flat(obs)
         self._seen_lo, self._seen_hi = np.minimum(self._seen_lo, x), np.maximum(self._seen_hi, x)
+        if obs.t == 0:
+            self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
         self._warm += 1
         if self._warm >= self.params.sarsa_warmup:
             lo, hi = self._seen_lo, self._seen_hi
             span = np.where(hi > lo, hi - lo, 1.0)
             self._lo, self._span = lo - 0.1 * span, 1.2 * span
+            if self.planner is not None:
+                # the planner's grid is spent where traces run: over the span of the start states
+                # met, widened by half of it on each side (random walks wander far wider); a value
+                # the starts do not vary keeps the range the walks showed
+                s_lo, s_hi = self._start_lo, self._start_hi
+                s_span = s_hi - s_lo
+                wide = np.isfinite(s_span) & (s_span > 1e-6 * np.maximum(span, 1e-12))
+                self._lo = np.where(wide, s_lo - 0.5 * s_span, self._lo)
+                self._span = np.where(wide, 2.0 * s_span, self._span)
         if obs.done:
             return Decision(reset=True, start=-1)
         return Decision(tuple(float(v) for v in self.actions[int(self.rng.integers(self.n_actions))]))
 
     def act(self, obs: Observation) -> Decision:
         assert self.background is not None
-        if self.sarsa is not None and self._warm < self.params.sarsa_warmup:
+        continuous = self.sarsa is not None or self.planner is not None
+        if continuous and self._warm < self.params.sarsa_warmup:
             return self._warmup(obs)
+        if self.phase == "explore" and self.planner is not None:
+            for name, result in self.background.tick():
+                if name == "embed":
+                    self._embedded(result)
+                elif name == "plan":
+                    self.planner.install(result)
+            return self._learn_planner(obs)
         if self.phase == "explore" and self.sarsa is not None:
             for name, result in self.background.tick():
                 if name == "embed":
@@ -988,6 +1110,8 @@ class GenericProgram(Program):
             elif name == "lspi":
                 self._iterated(result, obs.step)
                 iterated = True
+            elif name == "plan" and self.planner is not None:
+                self.planner.install(result)
         if self.phase == "explore":
             assert s is not None
             if iterated and self.spec.n_starts >= 2:
@@ -1039,6 +1163,8 @@ class GenericProgram(Program):
             self._diverged = False
         if self.sarsa is not None and not self._checking and self.params.epsilon == 0.0:
             self._learn_in_sweep(obs, None if dec.reset else int(dec.values[0]))
+        if self.planner is not None:  # a model learns from every transition, whoever chose it
+            self._model_step(obs, None if dec.reset else int(dec.values[0]))
         if not dec.reset:
             dec = Decision(tuple(float(v) for v in self.actions[int(dec.values[0])]))
         if self._sweep.finished:
@@ -1073,7 +1199,10 @@ class GenericProgram(Program):
         self.lspi.reset()
         if self.sarsa is not None:
             self.sarsa.reset()
+        if self.planner is not None:
+            self.planner.reset()
         assert self.background is not None
+        self.background.discard("plan")
         self.background.discard("lspi")  # an iteration over the dropped samples is never swapped in
         self.new_samples = 0
         self._prev, self._prev_x, self._prev_key = None, None, None
@@ -1134,11 +1263,16 @@ class GenericProgram(Program):
             if self._rotations is None
             else [self._rotations.order, [list(p) for p in self._rotations.powers]],
         }
+        if self.planner is not None:
+            out["planner"] = self.planner.state()
+            out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy())
+            out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
+            out.update(lo=self._lo.copy(), span=self._span.copy())
         if self.sarsa is not None:
             out["sarsa"] = self.sarsa.state()
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
             out.update(lo=self._lo.copy(), span=self._span.copy())
-        elif not self.tabular:
+        elif self.learner == "lspi":
             out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=_basis_state(self._rbf))
         return out
 
@@ -1187,6 +1321,15 @@ class GenericProgram(Program):
         self._start_fair = bool(state.get("start_fair", True))
         rot = state.get("rotations")
         self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
+        if self.planner is not None:
+            self.planner.restore(state["planner"])
+            self._start_lo = np.asarray(state["start_lo"], dtype=np.float64)
+            self._start_hi = np.asarray(state["start_hi"], dtype=np.float64)
+            self._warm = int(state["warm"])
+            self._seen_lo = np.asarray(state["seen_lo"], dtype=np.float64)
+            self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
+            self._lo = np.asarray(state["lo"], dtype=np.float64)
+            self._span = np.asarray(state["span"], dtype=np.float64)
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
             self._warm = int(state["warm"])
@@ -1194,7 +1337,7 @@ class GenericProgram(Program):
             self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
             self._lo = np.asarray(state["lo"], dtype=np.float64)
             self._span = np.asarray(state["span"], dtype=np.float64)
-        elif not self.tabular:
+        elif self.learner == "lspi":
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
             _set_basis(self._rbf, state["basis"])

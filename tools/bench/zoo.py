@@ -61,6 +61,15 @@ ZOO: tuple[ZooWorld, ...] = (
     ZooWorld("MountainCarContinuous, DTW", "gym:MountainCarContinuous-v0", {}, {"distance": "dtw"}, 100_000, 30_000),
     ZooWorld("PandaReach (state)", "gym:panda_gym:PandaReach-v3", {}, {}, 60_000, 15_000, "panda_gym"),
     ZooWorld(
+        "PandaReach (state), net move",
+        "gym:panda_gym:PandaReach-v3",
+        {},
+        {"distance": "net"},
+        60_000,
+        15_000,
+        "panda_gym",
+    ),
+    ZooWorld(
         "PandaReach (pixels)", "gym:panda_gym:PandaReach-v3", {"observe": "pixels"}, {}, 60_000, 10_000, "panda_gym"
     ),
 )
