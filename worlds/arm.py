@@ -92,7 +92,9 @@ class JointParams:
     """Lock a moving joint (a second lesion of it frees it); every start then shares its angle."""
 
     joint: str = option("", "the moving joint (empty: the first)")
-    at: float | None = option(None, "lock it at this angle, rad, within the lattice's range (none: where it is)")
+    at: float | None = option(
+        None, "lock it at this angle, rad, within the lattice's range (none: where it is)", min=-6.3, max=6.3
+    )
 
 
 @dataclass(frozen=True)
