@@ -51,9 +51,8 @@ classical MDS, Embedding vN. Once a sweep reaches the goal from `watch_after` of
 policy is *accepted*; after that a new policy is embedded only when its sweep is as good (as many
 goals, traces no longer), else the accepted policy is swept again - so embeddings hold once
 learned, and the drop detector sees only the accepted policy's trace scores, never the program's
-own experiments: in a deterministic world each relative to the accepted policy's own trace from
-that start (1 while it does what it did, gamma per extra step, 0 for a goal no longer reached), in
-a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are dropped,
+own experiments: in a deterministic world 0 for a start whose goal the accepted policy reached
+and no longer does, else 1; in a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are dropped,
 the policy relearned from fresh experience and the next embedding says `relearned`.
 """
 
@@ -521,7 +520,8 @@ class GenericProgram(Program):
         self._checking = False  # this sweep runs the accepted policy, not the newest one
         self._sweep_w: np.ndarray | None = None  # the weights the sweep in progress follows
         self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
-        self._sweep_rbf: _RBFFeatures | None = None  # that basis while the accepted policy is swept
+        self._sweep_rbf: _RBFFeatures | None = None  # the basis the sweep in progress computes features with
+        self._sweep_basis: dict[str, Any] | None = None  # and its state (lspi)
         self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
         self._accepted_reached: list[bool] | None = None  # and which of its traces reached the goal
         self._candidate_traces: list[list[int]] | None = None  # a better policy's traces, not yet confirmed
@@ -757,13 +757,17 @@ class GenericProgram(Program):
                 self._sweep_rbf = rbf
         return a
 
-    def _accepted_rbf(self) -> _RBFFeatures | None:
-        """The RBF basis the accepted weights are over, when it is not the current one."""
-        if self._accepted_basis is None:
+    def _rbf_of(self, basis: dict[str, Any] | None) -> _RBFFeatures | None:
+        """An RBF basis in the state `basis` (None for None)."""
+        if basis is None:
             return None
         rbf = _RBFFeatures(self._store, self.n_actions, self.params.centres)
-        _set_basis(rbf, self._accepted_basis)
+        _set_basis(rbf, basis)
         return rbf
+
+    def _accepted_rbf(self) -> _RBFFeatures | None:
+        """The RBF basis the accepted weights are over, when it is not the current one."""
+        return self._rbf_of(self._accepted_basis)
 
     def _cycle(self, obs: Observation, trace: list[int]) -> bool:
         """A deterministic greedy policy that meets the same observation after the same action again
@@ -778,7 +782,15 @@ class GenericProgram(Program):
         self._checking = check
         w = self._accepted if check and self._accepted is not None else self._weights()
         self._sweep_w = np.array(w, copy=True)
-        self._sweep_rbf = self._accepted_rbf() if check else None
+        if self.learner == "lspi":
+            # the basis is frozen for the sweep, as its weights are: a refit swapped in mid-sweep would
+            # give the weights features they were not fitted on, and the accepted policy's basis would
+            # not be the one its traces were made with (a check sweep then differs: a false drop)
+            use = self._accepted_basis if check and self._accepted_basis is not None else _basis_state(self._rbf)
+            self._sweep_basis = use
+            self._sweep_rbf = self._rbf_of(use)
+        else:
+            self._sweep_basis, self._sweep_rbf = None, None
         self._sweep = self._new_sweep()
         self._diverged = False
         self._unfed = []
@@ -851,7 +863,7 @@ class GenericProgram(Program):
             self._accepted_traces = traces
             self._accepted_reached = [bool(r) for r in sw.reached]
             self._candidate_traces = None
-            self._accepted_basis = None if self.learner != "lspi" else _basis_state(self._rbf)
+            self._accepted_basis = None if self.learner != "lspi" else self._sweep_basis
         self._watching = self._watching or good
         self._embed(step, relearned, k)
         self._checking = False
@@ -1175,20 +1187,17 @@ class GenericProgram(Program):
 
     def _trace_score(self, start: int, trace: list[int], ok: bool) -> float:
         """The detector's value of a trace. In a deterministic world, relative to the accepted
-        policy's own trace from that start: 1 while it does what it did (as long or shorter, or
-        failing where it failed), gamma per extra step, 0 for a goal no longer reached - so an
+        policy's own sweep: 0 for a start whose goal it reached and no longer does, else 1 - so an
         unchanged world gives a constant stream, however long or varied the traces (a sweep of many
-        starts in random order would otherwise show runs of long traces that read as drops), and
-        any change the policy meets shows at once. Otherwise (stochastic, or nothing accepted yet)
-        gamma^length at the goal, else 0."""
-        gamma = self.lspi.gamma
-        ref = self._accepted_traces
-        if self.stochastic or ref is None or self._accepted_reached is None or start >= len(self._accepted_reached):
-            return gamma ** len(trace) if ok else 0.0
-        was = self._accepted_reached[start]
+        starts in random order would otherwise show runs of long traces that read as drops), and a
+        change that breaks the policy shows at once. Lengths do not count: a trace that still
+        reaches the goal another way is not a drop. Otherwise (stochastic, or nothing accepted
+        yet) gamma^length at the goal, else 0."""
+        if self.stochastic or self._accepted_reached is None or start >= len(self._accepted_reached):
+            return self.lspi.gamma ** len(trace) if ok else 0.0
         if not ok:
-            return 0.0 if was else 1.0
-        return 1.0 if not was else min(1.0, gamma ** (len(trace) - len(ref[start])))
+            return 0.0 if self._accepted_reached[start] else 1.0
+        return 1.0
 
     def performance(self, obs: Observation) -> float | None:
         return self._perf.pop(0) if self._perf else None
@@ -1252,6 +1261,7 @@ class GenericProgram(Program):
             "sweep_w": None if self._sweep_w is None else self._sweep_w.copy(),
             "accepted_basis": self._accepted_basis,
             "sweep_on_accepted_basis": self._sweep_rbf is not None,
+            "sweep_basis": self._sweep_basis,
             "diverged": self._diverged,
             "accepted_traces": None if self._accepted_traces is None else [list(t) for t in self._accepted_traces],
             "accepted_reached": self._accepted_reached,
@@ -1308,7 +1318,12 @@ class GenericProgram(Program):
         self._sweep_w = None if sw is None else np.asarray(sw, dtype=np.float64)
         ab = state.get("accepted_basis")
         self._accepted_basis = None if ab is None else dict(ab)
-        self._sweep_rbf = self._accepted_rbf() if state.get("sweep_on_accepted_basis") else None
+        sb = state.get("sweep_basis")
+        self._sweep_basis = None if sb is None else dict(sb)
+        if self._sweep_basis is not None:
+            self._sweep_rbf = self._rbf_of(self._sweep_basis)
+        else:
+            self._sweep_rbf = self._accepted_rbf() if state.get("sweep_on_accepted_basis") else None
         self._diverged = bool(state.get("diverged", False))
         at = state.get("accepted_traces")
         self._accepted_traces = None if at is None else [[int(a) for a in t] for t in at]
