@@ -139,9 +139,10 @@ def _cli(argv: list[str] | None = None) -> int:
         print(f"no embedding in {res['seconds']} s")
         return 1
     drops = sum(row["drops"] for row in res["seeds"].values())
+    what = "one body change per world" if a.changes else "no change was made"
     print(
         f"{len(errors)} of {a.seeds} worlds embedded; final error mean {sum(errors) / len(errors):.4f}, "
-        f"worst {max(errors):.4f}; drops detected {drops} (no change was made); {res['seconds']} s"
+        f"worst {max(errors):.4f}; drops detected {drops} ({what}); {res['seconds']} s"
     )
     return 0
 
