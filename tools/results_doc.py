@@ -199,6 +199,11 @@ SOURCES: dict[str, Source] = {
         "results/arm-live/output.txt",
         command_output,
     ),
+    "arm-live-changes": Source(
+        "python -m sensorimotor.tools.experiments.arm_live --seeds 3 --seconds 300 --changes",
+        "results/arm-live-changes/output.txt",
+        command_output,
+    ),
     "bench-world-arm": Source("sme bench world --world arm", "results/bench-world-arm/output.txt", command_output),
 }
 SOURCES["detectors-quick"] = Source(
