@@ -22,7 +22,6 @@ def broken(runs, quick, workers, out):
 
 @pytest.fixture(scope="module")
 def tiny_report(tmp_path_factory):
-    pytest.importorskip("matplotlib")
     out = tmp_path_factory.mktemp("all")
     mp = pytest.MonkeyPatch()
     mp.setitem(reproduce.ALL, "broken", broken)

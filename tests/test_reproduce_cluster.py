@@ -22,7 +22,6 @@ def local_ray(monkeypatch):
 
 
 def test_cluster_gives_the_same_results_as_the_process_pool(local_ray, tmp_path):
-    pytest.importorskip("matplotlib")
     common = ["reproduce", "gridworld", "--quick", "--runs", "1"]
     assert main([*common, "--workers", "2", "--out", str(tmp_path / "pool")]) == 0
     assert main([*common, "--cluster", local_ray, "--out", str(tmp_path / "ray")]) == 0
