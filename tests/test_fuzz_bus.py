@@ -27,3 +27,14 @@ def test_fuzz_2000_messages_all_counted_no_crash_good_world_learns():
     assert r.good_world["alive"] and r.good_world["state"] == "attached"
     assert r.good_world_procrustes < 0.05, r
     assert r.handoffs == 0, r  # the fake and broken worlds never moved the good one
+    # what the ratio was paid with: every group's cores in both windows, read from /proc
+    for window in ("baseline", "fuzz"):
+        used = r.cpu[window]
+        assert used["agent"] > 0 and used["world"] > 0 and used["bench"] > 0, r.cpu
+        assert 0 < used["machine_busy"] <= 1, r.cpu
+    assert r.cpu["fuzz"]["bench"] > r.cpu["baseline"]["bench"], r.cpu  # it publishes only during the fuzz
+
+
+def test_fuzz_refuses_unknown_categories_before_starting_anything():
+    with pytest.raises(ValueError, match="unknown categories.*choose from obs_bytes"):
+        run(10, categories=("obs_bytes", "nonsense"))

@@ -136,29 +136,6 @@ def report_summary(src: Source, text: str) -> str:
     return out
 
 
-def runs10_estimate(src: Source, text: str) -> str:
-    """From a `sme reproduce all --quick --runs 1` folder: each chapter's CPU time, and that times
-    ten over two cores, the arithmetic estimate of the chapter's wall time at ``--runs 10`` on two
-    idle cores (an upper bound for the chapters whose jobs do not all grow with the runs: the one
-    live mountain-car run, chapter 9's state-aided vergence)."""
-    meta = json.loads(text)
-    lines = [
-        "| chapter | CPU time at `--runs 1` | x 10 runs / 2 cores |",
-        "|---|---|---|",
-    ]
-    total = 0.0
-    for name, info in meta["chapters"].items():
-        c = info.get("cpu_seconds")
-        if c is None:
-            lines.append(f"| {name} | {'failed' if info.get('error') else 'not recorded'} | |")
-            continue
-        total += c
-        lines.append(f"| {name} | {c:.0f} s | {c * 10 / 2 / 60:.1f} min |")
-    lines.append(f"| all | {total:.0f} s | {total * 10 / 2 / 60:.1f} min |")
-    rel = (DOCS / src.file).parent.relative_to(DOCS)
-    return "\n".join(lines) + f"\n\nFrom `{src.command}` (its `run.json`: `docs/{rel}/run.json`)."
-
-
 def lesion_sweep_table(src: Source, text: str) -> str:
     """The lesion sweep's table (its JSON's ``markdown``), with the command and file."""
     data = json.loads(text)
@@ -228,14 +205,6 @@ SOURCES["bench-detectors"] = Source(
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
 QUICK_ALL = "sme reproduce all --quick --runs 10"
 SOURCES["report-quick"] = Source(QUICK_ALL, "reproduce/report-quick/run.json", report_summary)
-SOURCES["report-quick-runs1"] = Source(
-    "nice -n 10 sme reproduce all --quick --runs 1 --workers 2", "reproduce/report-quick-runs1/run.json", report_summary
-)
-SOURCES["runs1-estimate"] = Source(
-    "nice -n 10 sme reproduce all --quick --runs 1 --workers 2",
-    "reproduce/report-quick-runs1/run.json",
-    runs10_estimate,
-)
 for _chapter, _block in (
     ("retina", "retina-quick"),
     ("retina-natural", "retina-natural-quick"),

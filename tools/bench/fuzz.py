@@ -43,6 +43,7 @@ from sensorimotor.protocol import sme_v1_pb2 as pb
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
 from sensorimotor.protocol.messages import AgentStatus, Observation, Truth, WorldEvent, WorldSpec
+from sensorimotor.tools.bench.procstat import busy_fraction, children, cores_used, cpu_ticks, machine_cpu
 from sensorimotor.tools.common import free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -96,6 +97,10 @@ class Result:
     settle_seconds: float = 0.0  # seconds after the last message until every one was counted (or the wait gave up)
     handoffs: int = 0  # claims of the good world declared or withdrawn during the fuzz (the bar: 0)
     ownership: dict[str, int] = field(default_factory=dict)  # the owners' shed/lost/taken_over increase
+    # cores used per process group (agent = its router process, workers = its worker processes, world,
+    # bench = this process, which publishes the hostile messages) and the machine's busy fraction, in
+    # the window before the fuzz and during it: what the step-rate ratio was paid with
+    cpu: dict[str, dict[str, float | None]] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         d = dict(self.__dict__)
@@ -411,6 +416,7 @@ def run(
     settle: float = 60.0,
     converge: float = 120.0,
     workers: int | None = None,
+    categories: tuple[str, ...] | None = None,
 ) -> Result:
     """Fuzz an agent with `messages` hostile messages at `rate` per second beside a good gridworld.
 
@@ -428,12 +434,19 @@ def run(
         Seconds to wait, after that, for the good world's embedding error to drop under 0.05.
     workers : int or None
         The agent's `--workers` (None: its default, the number of cores).
+    categories : tuple of str or None
+        Only these categories of hostile message (None: every one, in their usual proportions);
+        to see which kind of traffic costs the good world most.
 
     Returns
     -------
     Result
         Sent, counted, crashes, the good world's last Procrustes error and the breakdowns.
     """
+    cats = list(CATEGORIES) if not categories else list(categories)
+    unknown = sorted(set(cats) - set(CATEGORIES))
+    if unknown:
+        raise ValueError(f"unknown categories {unknown}; choose from {', '.join(CATEGORIES)}")
     ep = f"tcp/127.0.0.1:{free_port()}"
     res = Result()
     agent = _start("agent", "--listen", ep, "-q", *(() if workers is None else ("--workers", str(workers))))
@@ -466,7 +479,6 @@ def run(
                     pub = pubs[key] = bus.publisher(key, None, block=True)
                 pub.put(payload)
 
-            cats = list(CATEGORIES)
             weights = np.array([CATEGORIES[c][0] for c in cats], dtype=float)
             plan = fz.rng.choice(len(cats), size=messages, p=weights / weights.sum())
             sent: Counter[str] = Counter()
@@ -504,15 +516,32 @@ def run(
                             (cat, f"fz-{i}", b"" if variant == "error_reply" else fz.fake_spec(f"fz-{i}", variant))
                         )
 
+            groups = {
+                "agent": [agent.pid],
+                "workers": children(agent.pid),
+                "world": [world.pid],
+                "bench": [os.getpid()],
+            }
+
+            def window_cpu(
+                t0: float, ticks: dict[str, int], busy: tuple[float, float] | None
+            ) -> dict[str, float | None]:
+                used: dict[str, float | None] = dict(cores_used(ticks, cpu_ticks(groups), time.perf_counter() - t0))
+                used["machine_busy"] = busy_fraction(busy, machine_cpu())
+                return used
+
             # the baseline: the same agent and world, as long as the fuzz is meant to last, no hostile message
             b0 = good_steps()
+            c0, m0 = cpu_ticks(groups), machine_cpu()
             time.sleep(messages / rate)
             res.baseline_before = steps_per_s(b0, good_steps())
+            res.cpu["baseline"] = window_cpu(b0[0], c0, m0)
             before = _counts(_status(bus))
             version_before = link.embedding_version
             good_claims: list[tuple[str, bool]] = []  # claim tokens of the good world seen during the fuzz
             handles.append(bus.watch_alive(keys.alive_claim(GOOD, "*"), lambda k, a: good_claims.append((k, a)), False))
             f0 = good_steps()
+            c0, m0 = cpu_ticks(groups), machine_cpu()
             t0 = time.perf_counter()
             for i, (cat, where, body) in enumerate(todo):
                 if cat != "attach":
@@ -534,6 +563,7 @@ def run(
                     time.sleep(ahead)
             res.seconds = round(time.perf_counter() - t0, 3)
             res.fuzz_steps_per_s = steps_per_s(f0, good_steps())
+            res.cpu["fuzz"] = window_cpu(f0[0], c0, m0)
             res.rate = round(messages / res.seconds, 1) if res.seconds else 0.0
             res.sent = sum(sent.values())
             res.categories = dict(sorted(sent.items()))
@@ -606,15 +636,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--messages", type=int, default=10000, help="hostile messages to send (default 10000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the message generator (default 0)")
     p.add_argument("--rate", type=float, default=1000.0, help="messages per second (default 1000)")
+    p.add_argument(
+        "--categories",
+        default="",
+        help=f"only these kinds of hostile message, comma-separated (default every one: {','.join(CATEGORIES)})",
+    )
     p.add_argument("--json", action="store_true", help="one JSON object on one line")
     p.set_defaults(func=main_args)
 
 
-def main(messages: int, seed: int = 0, rate: float = 1000.0, as_json: bool = False) -> int:
+def main(
+    messages: int, seed: int = 0, rate: float = 1000.0, as_json: bool = False, categories: tuple[str, ...] = ()
+) -> int:
     """Run the fuzz and print its result; exit 0 when every message was counted, nothing crashed,
     the good world's embedding error is under 0.05, its step rate kept 80 % of the baseline's and no
     world was handed off, else 1."""
-    r = run(messages, seed, rate)
+    r = run(messages, seed, rate, categories=categories or None)
     if as_json:
         print(json.dumps(r.as_dict()))
     else:
@@ -626,6 +663,8 @@ def main(messages: int, seed: int = 0, rate: float = 1000.0, as_json: bool = Fal
         for c in COUNTERS:
             print(f"  {c:<16} expected {r.expected.get(c, 0):>6}  counted {r.counters.get(c, 0):>6}")
         print(f"  rejected by kind: {r.rejected_kinds}")
+        for window, used in r.cpu.items():
+            print(f"  cores used {window:<9} " + ", ".join(f"{k} {v}" for k, v in used.items()))
     ok = (
         r.crashes == 0
         and r.counted == r.sent
@@ -637,4 +676,9 @@ def main(messages: int, seed: int = 0, rate: float = 1000.0, as_json: bool = Fal
 
 
 def main_args(args: argparse.Namespace) -> int:
-    return main(args.messages, args.seed, args.rate, args.json)
+    cats = tuple(c.strip() for c in args.categories.split(",") if c.strip())
+    unknown = sorted(set(cats) - set(CATEGORIES))
+    if unknown:
+        print(f"sme bench fuzz: unknown categories {unknown}; choose from {', '.join(CATEGORIES)}", file=sys.stderr)
+        return 2
+    return main(args.messages, args.seed, args.rate, args.json, cats)

@@ -32,6 +32,7 @@ from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
 from sensorimotor.protocol.messages import Action, AgentStatus, Observation
 from sensorimotor.tools.bench import gap
+from sensorimotor.tools.bench.procstat import busy_fraction, machine_cpu
 from sensorimotor.tools.common import free_port
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -103,22 +104,11 @@ def _wait(pred: Any, timeout: float) -> Any:
     return pred()
 
 
-def _cpu_times() -> tuple[float, float] | None:
-    """(busy, total) jiffies of the whole machine, or None where /proc/stat is missing."""
-    try:
-        with open("/proc/stat") as fh:
-            f = [float(x) for x in fh.readline().split()[1:]]
-    except (OSError, ValueError):
-        return None
-    idle = f[3] + (f[4] if len(f) > 4 else 0.0)
-    return sum(f) - idle, sum(f)
-
-
 def _sample_cpu(out: list, stop: threading.Event, every: float = 0.25) -> None:
     while True:
-        out.append((time.monotonic(), _cpu_times()))
+        out.append((time.monotonic(), machine_cpu()))
         if stop.wait(every):
-            out.append((time.monotonic(), _cpu_times()))
+            out.append((time.monotonic(), machine_cpu()))
             return
 
 
@@ -130,9 +120,7 @@ def _busy_mid(samples: list[tuple[float, tuple[float, float] | None]]) -> float 
     t0, t1 = samples[0][0], samples[-1][0]
     a = min(samples, key=lambda x: abs(x[0] - (t0 + 0.5 * (t1 - t0))))[1]
     b = min(samples, key=lambda x: abs(x[0] - (t0 + 0.9 * (t1 - t0))))[1]
-    if a is None or b is None or b[1] <= a[1]:
-        return None
-    return round((b[0] - a[0]) / (b[1] - a[1]), 3)
+    return busy_fraction(a, b)
 
 
 def serve_worlds(

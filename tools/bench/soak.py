@@ -24,11 +24,12 @@ from typing import IO, Any
 
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusMessage
+from sensorimotor.tools.bench.procstat import TICKS_PER_S as TICK
+from sensorimotor.tools.bench.procstat import proc_sample
 from sensorimotor.tools.common import free_port, require
 
 WARMUP_S = 300.0  # RSS growth is measured from the first sample at or after this time
 PROBLEM = re.compile(r"\b(ERROR|WARNING|CRITICAL)\b|Traceback")
-TICK = os.sysconf("SC_CLK_TCK")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -55,18 +56,6 @@ class Proc:
     cpu_ticks: int = 0
     problems: int = 0
     last_problems: list[str] = field(default_factory=list)
-
-
-def proc_sample(pid: int) -> tuple[float, int] | None:
-    """(RSS in MB, utime+stime in clock ticks) of process `pid`, None once it is gone."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return None
-    rss_kb = next((int(ln.split()[1]) for ln in status.splitlines() if ln.startswith("VmRSS:")), 0)
-    fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
-    return rss_kb / 1024, int(fields[11]) + int(fields[12])  # utime, stime (fields 14, 15)
 
 
 def start(name: str, args: list[str], out: Path) -> Proc:
