@@ -1038,6 +1038,7 @@ class AgentDaemon:
             self._attach_failed(wid, "no_program", e)
             return
         att.link.set_lease(self.owner_id, epoch)
+        att.link.outputs_in_background()  # an embedding's scores must not hold up other worlds' answers
         if previous is not None and att.link is not previous:
             previous.stop()
         floor = self._version_floor(wid)

@@ -8,7 +8,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -153,6 +155,9 @@ class WorldLink:
         self._failures = 0  # consecutive program failures
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._outputs: ThreadPoolExecutor | None = None  # see outputs_in_background
+        self._pending: deque[Future[None]] = deque()
+        self._out_lock = threading.Lock()  # acts and the daemon's thread both queue outputs
 
     # lifecycle ---------------------------------------------------------------------------------
     def start(self) -> None:
@@ -163,11 +168,53 @@ class WorldLink:
             self._thread.start()
 
     def stop(self) -> None:
-        """Stop the link's thread (if any) and close its inbox."""
+        """Stop the link's thread (if any), publish what its output thread still holds, and close
+        its inbox."""
         self._stop.set()
         self.inbox.close()
         if self._thread is not None:
             self._thread.join(timeout=5)
+        outputs, self._outputs = self._outputs, None
+        if outputs is not None:
+            outputs.shutdown(wait=True)
+            self._pending.clear()
+
+    MAX_PENDING_OUTPUTS = 8  # embeddings and events queued for the output thread before an act waits
+
+    def outputs_in_background(self) -> None:
+        """Publish this link's embeddings and events from one thread of its own, in the order they
+        were made. An embedding's field scores (trustworthiness and the rest: O(n^2), about 100 ms at
+        1000 points) are then computed off the act path, which a live agent shares with every other
+        world it answers; in-process uses (tests, `sme replay --offline`, `sme reproduce`) keep
+        publishing synchronously. Actions are always published at once."""
+        if self._outputs is None:
+            self._outputs = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"out-{self.world_id}")
+
+    def _output(self, job: Callable[[], None]) -> None:
+        """Run `job` (which publishes) now, or queue it for the output thread, in order."""
+        outputs = self._outputs
+        if outputs is None:
+            job()
+            return
+
+        def run() -> None:
+            try:
+                job()
+            except Exception:  # noqa: BLE001 - a failed publish must not end the output thread
+                log.exception("world %s: publishing an output failed", self.world_id)
+
+        with self._out_lock:
+            pending = self._pending
+            while pending and pending[0].done():
+                pending.popleft()
+            if len(pending) >= self.MAX_PENDING_OUTPUTS:  # the thread is behind: wait for its oldest job
+                pending.popleft().result()
+            try:
+                pending.append(outputs.submit(run))
+                return
+            except RuntimeError:  # shut down meanwhile (the link is being stopped)
+                pass
+        job()
 
     def set_lease(self, owner: str, epoch: int) -> None:
         """Answer as `owner` under lease `epoch` from now on (0: unfenced); a resent observation
@@ -230,12 +277,10 @@ class WorldLink:
         config: AttachConfig | None = None,
     ) -> None:
         """Publish an AgentEvent about this world."""
-        self.publish(
-            "event",
-            AgentEvent(
-                self.agent_id, self.world_id, kind, detail, step, time.time(), dict(values or {}), reason, config
-            ),
+        ev = AgentEvent(
+            self.agent_id, self.world_id, kind, detail, step, time.time(), dict(values or {}), reason, config
         )
+        self._output(lambda: self.publish("event", ev))
 
     def world_event(self, ev: WorldEvent) -> None:
         """A WorldEvent from this world: counted, and passed on as an agent event (rate-limited)."""
@@ -366,37 +411,43 @@ class WorldLink:
         if isinstance(item, EmbeddingOutput):
             scores = evaluate_embedding(item, self.truth)
             err = scores.pop("procrustes_error", None)
-            field = embedding_scores(item, self.truth) if err is not None else None
+            truth = self.truth
             self.version += 1
+            version = self.version
             self.counters.embeddings += 1
             if err is not None:
                 self.counters.last_error = err
-            emb = Embedding(
-                self.agent_id,
-                self.world_id,
-                self.version,
-                item.trigger,
-                item.ids,
-                np.asarray(item.coordinates, dtype=np.float64),
-                item.eigenvalues,
-                err,
-                item.step,
-                time.time(),
-                {**item.metrics, **scores},
-                item.iteration,
-                item.drop_step,
-                item.labels,
-                field,
-            )
-            log.info(
-                "world %s: embedding v%d (%s) n=%d error=%s",
-                self.world_id,
-                self.version,
-                item.trigger,
-                len(item.ids),
-                "n/a" if err is None else f"{err:.4f}",
-            )
-            self.publish("embedding", emb)
+
+            def publish_embedding() -> None:
+                field = embedding_scores(item, truth) if err is not None else None
+                emb = Embedding(
+                    self.agent_id,
+                    self.world_id,
+                    version,
+                    item.trigger,
+                    item.ids,
+                    np.asarray(item.coordinates, dtype=np.float64),
+                    item.eigenvalues,
+                    err,
+                    item.step,
+                    time.time(),
+                    {**item.metrics, **scores},
+                    item.iteration,
+                    item.drop_step,
+                    item.labels,
+                    field,
+                )
+                log.info(
+                    "world %s: embedding v%d (%s) n=%d error=%s",
+                    self.world_id,
+                    version,
+                    item.trigger,
+                    len(item.ids),
+                    "n/a" if err is None else f"{err:.4f}",
+                )
+                self.publish("embedding", emb)
+
+            self._output(publish_embedding)
         elif isinstance(item, EventOutput):
             self.event(item.kind, item.detail, item.step, item.values, reason=item.reason)
 

@@ -16,6 +16,7 @@ pure decision made from a snapshot of it, once per tick.
 from __future__ import annotations
 
 import threading
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -46,7 +47,8 @@ class OwnerBook:
         self._lock = threading.Lock()
         self._worlds: set[str] = set()
         self._owners: set[str] = set()
-        self._claims: dict[str, set[str]] = {}
+        # immutable per world, so that a view is one shallow copy and lock-free reads see whole sets
+        self._claims: dict[str, frozenset[str]] = {}
         self.unclaimed_since: dict[str, float] = {}
 
     def world(self, world: str, alive: bool) -> None:
@@ -66,14 +68,12 @@ class OwnerBook:
             return
         world, owner = parts[-2], parts[-1]
         with self._lock:
-            if alive:
-                self._claims.setdefault(world, set()).add(owner)
+            c = self._claims.get(world, frozenset())
+            c = c | {owner} if alive else c - {owner}
+            if c:
+                self._claims[world] = c
             else:
-                c = self._claims.get(world)
-                if c is not None:
-                    c.discard(owner)
-                    if not c:
-                        del self._claims[world]
+                self._claims.pop(world, None)
 
     def claimed_by_other(self, world: str, me: str) -> bool:
         """Whether an owner other than `me` claims `world` (lock-free read: for the hot path)."""
@@ -81,18 +81,13 @@ class OwnerBook:
         return c is not None and bool(c) and (me not in c or len(c) > 1)
 
     def claimants(self, world: str) -> frozenset[str]:
-        """The owners claiming `world` now (a copy; cheaper than a whole `view` per world)."""
-        with self._lock:
-            return frozenset(self._claims.get(world, ()))
+        """The owners claiming `world` now (cheaper than a whole `view` per world)."""
+        return self._claims.get(world, frozenset())
 
     def view(self) -> View:
         """A consistent snapshot."""
         with self._lock:
-            return View(
-                frozenset(self._worlds),
-                frozenset(self._owners),
-                {w: frozenset(c) for w, c in self._claims.items() if c},
-            )
+            return View(frozenset(self._worlds), frozenset(self._owners), dict(self._claims))
 
 
 @dataclass(frozen=True)
@@ -146,26 +141,23 @@ def plan(
     """
     mine = set(mine)
     release: dict[str, str] = {}
-    for w in sorted(mine):
-        if w not in view.worlds:
-            release[w] = "world gone"
-            continue
-        claimants = view.claims.get(w, frozenset())
-        if len(claimants) > 1 or me not in claimants:  # (the usual case, alone: nothing to compare)
-            lower = min((o for o in claimants if o < me), default=None)
-            if lower is not None:
-                release[w] = f"{lower} claims it too (the lower owner id wins)"
+    claims, worlds = view.claims, view.worlds
+    empty: frozenset[str] = frozenset()
+    # set operations and one pass each: a tick must stay cheap with thousands of (fake) worlds
+    for w in sorted(mine - worlds):
+        release[w] = "world gone"
+    contested = [w for w in mine & worlds if len(c := claims.get(w, empty)) > 1 or me not in c]
+    for w in sorted(contested):  # (the usual case, alone: nothing to compare)
+        lower = min((o for o in claims.get(w, empty) if o < me), default=None)
+        if lower is not None:
+            release[w] = f"{lower} claims it too (the lower owner id wins)"
     held = mine - set(release)
     owners = set(view.owners) | {me}
-    loads = dict.fromkeys(owners, 0)
-    for w, claimants in view.claims.items():  # one pass (View.load per owner would be one each)
-        if w in view.worlds:
-            for o in claimants:
-                if o in loads:
-                    loads[o] += 1
-    loads[me] = len([w for w in held if w in view.worlds])
+    by_set = Counter(map(claims.__getitem__, claims.keys() & worlds))  # few distinct claimant sets
+    loads = {o: sum(n for c, n in by_set.items() if o in c) for o in owners}
+    loads[me] = len(held & worlds)
     least = min(loads.values())
-    healthy = {w for w in held - failed if w in view.worlds}
+    healthy = (held - failed) & worlds
     shed = None
     if may_shed and len(healthy) >= least + 2:
         shed = max(healthy)  # deterministic: the last in id order
@@ -173,7 +165,7 @@ def plan(
     if loads[me] <= least and shed is None:
         tied = sorted(o for o, n in loads.items() if n == least)
         rank = tied.index(me) if me in tied else len(tied)
-        free = sorted(w for w in view.worlds if w not in view.claims and w not in mine and w not in avoid)
+        free = worlds - claims.keys() - mine - avoid
         for w in sorted(free, key=lambda w: (w not in known, w)):
             wait = 0.0 if w in known else claim_delay * (1 + rank)
             if unclaimed_for.get(w, 0.0) >= wait:

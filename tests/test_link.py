@@ -1,12 +1,22 @@
 """The world link on its own: detection, relearning hooks, resends, stale and bad observations."""
 
+import threading
+
 import numpy as np
 
 from sensorimotor.agent.detectors import CUSUM
 from sensorimotor.agent.link import WorldLink
-from sensorimotor.agent.programs.base import Decision, Program
+from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.protocol import codec
-from sensorimotor.protocol.messages import ActionSpace, Observation, SensorSpec, WorldSpec
+from sensorimotor.protocol.messages import (
+    ActionSpace,
+    EventKind,
+    Observation,
+    SensorSpec,
+    Trigger,
+    Truth,
+    WorldSpec,
+)
 
 SPEC = WorldSpec("w", "toy", (SensorSpec("x", "float32", (2,)),), ActionSpace(n=2), program="toy")
 
@@ -79,3 +89,42 @@ def test_a_failing_program_does_not_kill_the_link():
     prog.act = lambda o: 1 / 0
     a = link.answer(obs(0))
     assert a.reset and any(m.kind == "program_error" for ch, m in out if ch == "event")
+
+
+class Mapper(Toy):
+    """Emits an embedding of 400 points and then an event at act 1."""
+
+    def act(self, obs):
+        if obs.step == 1:
+            rng = np.random.default_rng(0)
+            self.emit(
+                EmbeddingOutput(Trigger.POLICY_ITERATION, tuple(range(400)), rng.normal(size=(400, 2)), (1.0, 1.0), 1)
+            )
+            self.emit(EventOutput(EventKind.RELEARNED, "after the embedding", 1))
+        return Decision((0.0,))
+
+
+def test_outputs_in_background_are_published_off_the_act_path_in_order_and_flushed_by_stop():
+    out = []
+    link = WorldLink(
+        "a0", SPEC, Mapper(SPEC), lambda ch, m: out.append((ch, m, threading.current_thread().name)), CUSUM()
+    )
+    link.truth = Truth("w", "toy", {"positions": np.random.default_rng(1).normal(size=(400, 2))})
+    link.outputs_in_background()
+    link.answer(obs(0))
+    link.answer(obs(1))
+    assert link.version == 1  # counted at once, published by the output thread
+    link.stop()  # waits for what is queued
+    kinds = [(ch, getattr(m, "kind", None)) for ch, m, _ in out if ch != "act"]
+    assert kinds == [("embedding", None), ("event", EventKind.RELEARNED)], kinds
+    emb = next(m for ch, m, _ in out if ch == "embedding")
+    assert emb.version == 1 and emb.scores is not None and 0 <= emb.scores.trustworthiness <= 1
+    threads = {ch: t for ch, _, t in out}
+    assert threads["act"] == threading.current_thread().name
+    assert threads["embedding"].startswith("out-w") and threads["event"].startswith("out-w"), threads
+    # without it (in-process runs, replay): everything on the caller's thread, as before
+    out2 = []
+    link2 = WorldLink("a0", SPEC, Mapper(SPEC), lambda ch, m: out2.append(threading.current_thread().name), CUSUM())
+    link2.answer(obs(0))
+    link2.answer(obs(1))
+    assert set(out2) == {threading.current_thread().name}

@@ -58,9 +58,10 @@ def measure(name: str, steps: int, params: dict[str, str]) -> dict:
 
 def raw_frame(px: int = 128, frames: int = 200) -> dict:
     import pybullet as p
-    from pybullet_utils.bullet_client import BulletClient
 
-    c = BulletClient(connection_mode=p.DIRECT)
+    from sensorimotor.worlds.bullet import direct_client
+
+    c = direct_client()
     try:
         vis = c.createVisualShape(p.GEOM_BOX, halfExtents=[0.01, 7, 7], rgbaColor=[0, 0, 0, 1])
         c.createMultiBody(0, baseVisualShapeIndex=vis, basePosition=[5, 0, 0])
@@ -85,15 +86,15 @@ def raw_urdf(params: dict[str, str], steps: int) -> list[dict]:
     """The simulator's own limits for the arm's URDF: physics steps with the moving joints set,
     and TinyRenderer frames of the robot at the world's image size (no marker, no caching)."""
     import pybullet as p
-    from pybullet_utils.bullet_client import BulletClient
 
     from sensorimotor.worlds.arm import ArmWorld
+    from sensorimotor.worlds.bullet import direct_client
 
     with make_world("arm", None, 0, params) as w:
         assert isinstance(w, ArmWorld)
         urdf, moving, size, view, proj = w.urdf, list(w.moving), w.params.image, w._view, w._proj
         poses = w.poses
-    c = BulletClient(connection_mode=p.DIRECT)
+    c = direct_client()
     rows = []
     try:
         body = c.loadURDF(urdf, useFixedBase=True)
