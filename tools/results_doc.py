@@ -68,16 +68,24 @@ def _cell(v: object) -> str:
     return "" if v is None else str(v)
 
 
+def _dig(row: dict, key: str) -> object:
+    """`row[key]`, where a dotted key reaches into nested objects (``cpu.fuzz.bench``)."""
+    v: object = row
+    for part in key.split("."):
+        v = v.get(part) if isinstance(v, dict) else None
+    return v
+
+
 def jsonl_table(
     columns: tuple[tuple[str, str], ...], keep: Callable[[dict], bool] = lambda r: True
 ) -> Callable[[Source, str], str]:
     """A renderer for a command's JSON lines (a bench's ``--json``): one table row per kept line,
-    one column per (header, key)."""
+    one column per (header, key; dotted keys reach into nested objects)."""
 
     def render_jsonl(src: Source, text: str) -> str:
         rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
         lines = ["| " + " | ".join(h for h, _ in columns) + " |", "|" + "---|" * len(columns)]
-        lines += ["| " + " | ".join(_cell(r.get(k)) for _, k in columns) + " |" for r in rows if keep(r)]
+        lines += ["| " + " | ".join(_cell(_dig(r, k)) for _, k in columns) + " |" for r in rows if keep(r)]
         return "\n".join(lines) + f"\n\nFrom `{src.command}` (its output: `docs/{src.file}`)."
 
     return render_jsonl
@@ -200,6 +208,42 @@ SOURCES["bench-detectors"] = Source(
             ("false alarms / 10k", "false_alarms_per_10k"),
         ),
         lambda r: r.get("streams") == "synthetic",
+    ),
+)
+SOURCES["bench-loop"] = Source("sme bench loop --steps 20000", "results/bench-loop/output.txt", command_output)
+SOURCES["bench-world"] = Source("sme bench world --world retina", "results/bench-world/output.txt", command_output)
+SOURCES["bench-gap"] = Source("sme bench gap --seconds 20", "results/bench-gap/output.txt", command_output)
+SOURCES["bench-scale"] = Source("sme bench scale", "results/bench-scale/output.txt", command_output)
+SOURCES["bench-scale-work"] = Source(
+    "sme bench scale --worlds 8 --agent-work-us 2000 --rounds 1 --no-failover",
+    "results/bench-scale-work/output.txt",
+    command_output,
+)
+SOURCES["bench-soak"] = Source(
+    "sme bench soak --minutes 15 --out DIR  # its lines after the JSON summary (kept as summary.json beside)",
+    "results/bench-soak/output.txt",
+    command_output,
+)
+SOURCES["bench-fuzz"] = Source(
+    "sme bench fuzz --messages 10000 --json",
+    "results/bench-fuzz/output.jsonl",
+    jsonl_table(
+        (
+            ("sent", "sent"),
+            ("counted", "counted"),
+            ("crashes", "crashes"),
+            ("good world Procrustes", "good_world_procrustes"),
+            ("steps/s without (mean of before and after)", "baseline_steps_per_s"),
+            ("steps/s during the fuzz", "fuzz_steps_per_s"),
+            ("ratio", "step_rate_ratio"),
+            ("hand-offs", "handoffs"),
+            ("settled after (s)", "settle_seconds"),
+            ("cores: agent", "cpu.fuzz.agent"),
+            ("workers", "cpu.fuzz.workers"),
+            ("world", "cpu.fuzz.world"),
+            ("fuzzer", "cpu.fuzz.bench"),
+            ("machine busy", "cpu.fuzz.machine_busy"),
+        )
     ),
 )
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
