@@ -20,7 +20,14 @@ copyright = "the sensorimotor-embedding authors"
 extensions = ["myst_parser", "sphinx.ext.autodoc", "sphinx.ext.napoleon", "sphinx.ext.viewcode"]
 source_suffix = {".md": "markdown"}
 master_doc = "index"
-exclude_patterns = ["_build", "_generated/**/*.md", "tutorials/*.py", "**/README.md"]
+exclude_patterns = [
+    "_build",
+    "_generated/**/*.md",
+    "tutorials/*.py",
+    "**/README.md",
+    # each chapter's table as the command wrote it: the report beside it shows it already
+    "reproduce/*/*/table.md",
+]
 html_theme = "furo"
 html_title = "sensorimotor-embedding"
 html_static_path = ["_static"]

@@ -114,7 +114,9 @@ def test_flood_ten_times_the_answer_rate_is_bounded_and_counted(procs, endpoint)
         # The baseline is taken once the program has warmed up: its first sweeps and embeddings load
         # code and allocate their matrices (about +30 MB in the first ~9,000 steps, flood or not);
         # what is bounded here is what the flood adds after that.
-        assert wait_for(lambda: (ln := world_link(agent_status(endpoint), "xflood")) is not None and ln.steps > 10_000, 60)
+        assert wait_for(
+            lambda: (ln := world_link(agent_status(endpoint), "xflood")) is not None and ln.steps > 10_000, 60
+        )
         assert flood.poll() is None, "the flood ended before the agent had warmed up"
         before = rss(agent.pid)
         peak = before

@@ -30,9 +30,9 @@ def test_fuzz_2000_messages_all_counted_no_crash_good_world_learns():
     # what the ratio was paid with: every group's cores in both windows, read from /proc
     for window in ("baseline", "fuzz"):
         used = r.cpu[window]
-        assert used["agent"] > 0 and used["world"] > 0 and used["bench"] > 0, r.cpu
+        assert used["agent"] > 0 and used["world"] > 0, r.cpu
         assert 0 < used["machine_busy"] <= 1, r.cpu
-    assert r.cpu["fuzz"]["bench"] > r.cpu["baseline"]["bench"], r.cpu  # it publishes only during the fuzz
+    assert r.cpu["fuzz"]["bench"] > r.cpu["baseline"]["bench"] >= 0, r.cpu  # it publishes only during the fuzz
 
 
 def test_fuzz_refuses_unknown_categories_before_starting_anything():
