@@ -393,6 +393,7 @@ class GenericProgram(Program):
     detector_params = {"warmup": 30, "rate": 0.05}
     #: transitions remembered to tell a stochastic world (bounded memory)
     TRANSITIONS = 50_000
+    RELEARN_CONFIRM = 3  # good sweeps after a drop that may go unpublished while their traces still change
 
     def __init__(
         self, spec: WorldSpec, seed: int = 0, params: GenericProgramParams | None = None, **overrides: Any
@@ -525,6 +526,7 @@ class GenericProgram(Program):
         self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
         self._accepted_reached: list[bool] | None = None  # and which of its traces reached the goal
         self._candidate_traces: list[list[int]] | None = None  # a better policy's traces, not yet confirmed
+        self._relearn_unconfirmed = 0  # good sweeps since a drop whose traces the next one did not keep
         self._diverged = False  # the trace in progress left the accepted policy's choices
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self._start_scores: list[float] = []  # scores of the start state in progress (one per sample)
@@ -855,9 +857,27 @@ class GenericProgram(Program):
                 if absolute:
                     self._perf.extend(self._unfed)  # better than the accepted policy: its scores are fair
                 return None
+        if (
+            good
+            and self.relearn_at is not None
+            and not self.stochastic
+            and traces != self._candidate_traces
+            and self._relearn_unconfirmed < self.RELEARN_CONFIRM
+        ):
+            # relearning after a body change: the first policies that reach the goal again still
+            # change from one iteration to the next, and the map of their detours can be far off
+            # the new body; the relearned map is published once an iteration keeps the traces of
+            # the one before (or after RELEARN_CONFIRM good sweeps that never settled)
+            self._candidate_traces = traces
+            self._relearn_unconfirmed += 1
+            if absolute:
+                self._perf.extend(self._unfed)
+            return None
         if (self._watching or good) and absolute:
             self._perf.extend(self._unfed)
         relearned = good and self.relearn_at is not None
+        if relearned:
+            self._relearn_unconfirmed = 0
         if not self._checking and (better or not self._watching):
             self._accepted, self._best = np.array(self._sweep_w, copy=True), score
             self._accepted_traces = traces
@@ -1220,6 +1240,7 @@ class GenericProgram(Program):
         self._watching = False
         self._accepted, self._best, self._checking = None, None, False
         self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
+        self._relearn_unconfirmed = 0
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
         self._rotations = None
@@ -1240,6 +1261,7 @@ class GenericProgram(Program):
             "phase": self.phase,
             "new_samples": self.new_samples,
             "relearn_at": self.relearn_at,
+            "relearn_unconfirmed": self._relearn_unconfirmed,
             "prev": None if self._prev is None else list(self._prev),
             "prev_x": None if self._prev_x is None else self._prev_x.copy(),
             "prev_key": None if self._prev_key is None else self._prev_key.hex(),
@@ -1293,6 +1315,7 @@ class GenericProgram(Program):
         self.lspi.restore(state["lspi"])
         self.phase, self.new_samples = str(state["phase"]), int(state["new_samples"])
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
+        self._relearn_unconfirmed = int(state.get("relearn_unconfirmed", 0))  # absent in older checkpoints
         self._prev = None if state["prev"] is None else (int(state["prev"][0]), int(state["prev"][1]))
         px = state.get("prev_x")
         self._prev_x = None if px is None else np.asarray(px, dtype=np.float64)
