@@ -153,3 +153,34 @@ def test_report_only_judges_the_results_again_without_running(tiny_report, tmp_p
     table = [line for line in before.splitlines() if line.startswith("| ")]
     assert table == [line for line in after.splitlines() if line.startswith("| ")]
     assert "this chapter is broken on purpose" in after
+
+
+def test_resume_keeps_the_finished_chapters_and_runs_the_rest(tiny_report, tmp_path, capsys):
+    _, first = tiny_report
+    out = tmp_path / "resumed"
+    shutil.copytree(first, out)
+    before = json.loads((out / "gridworld" / "results.json").read_text())
+    calls = []
+
+    def fixed(runs, quick, workers, out_dir):
+        calls.append(runs)
+        return {"markdown": "fixed now", "cpu_seconds": 0.0}
+
+    mp = pytest.MonkeyPatch()
+    mp.setitem(reproduce.ALL, "broken", fixed)
+    mp.setitem(report.CHAPTER_ROWS, "broken", ("A chapter that fails", lambda res, quick: []))
+    try:
+        args = ["reproduce", "all", "--quick", "--runs", "2", "--workers", "1", "--chapters", "gridworld,broken"]
+        assert main([*args, "--out", str(out), "--resume"]) == 0
+        assert calls == [2]  # only the chapter that had failed ran again
+        assert "gridworld: kept from the earlier run" in capsys.readouterr().out
+        assert json.loads((out / "gridworld" / "results.json").read_text()) == before
+        meta = json.loads((out / "run.json").read_text())
+        assert meta["sittings"] == 2 and not meta["chapters"]["broken"]["error"]
+        assert "in 2 sittings" in (out / "report.md").read_text()
+        # other settings than the run in OUT: refused, nothing touched
+        assert main(["reproduce", "all", "--runs", "3", "--out", str(out), "--resume"]) == 2
+        assert "holds a run with" in capsys.readouterr().err
+        assert json.loads((out / "run.json").read_text()) == meta
+    finally:
+        mp.undo()

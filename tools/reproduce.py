@@ -714,6 +714,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=f"all only: the chapters to run, comma-separated (default every one: {','.join(ALL)})",
     )
     p.add_argument(
+        "--resume",
+        action="store_true",
+        help="all only: keep the chapters an earlier run into --out finished (same --runs and --quick) and run the "
+        "rest; a long run cut short goes on from where it stopped",
+    )
+    p.add_argument(
         "--report-only",
         action="store_true",
         help="all only: run nothing; judge the results.json already in --out again and rewrite the report",
@@ -752,7 +758,9 @@ def _where(args: argparse.Namespace) -> str:
     return f"{args.workers} workers" if cluster is None else f"Ray cluster {cluster}"
 
 
-def _header(args: argparse.Namespace, names: list[str], chapters: list[Any], total: float | None) -> dict[str, str]:
+def _header(
+    args: argparse.Namespace, names: list[str], chapters: list[Any], total: float | None, sittings: int = 1
+) -> dict[str, str]:
     from sensorimotor.tools import report
 
     env = report.environment(os.path.dirname(os.path.abspath(__file__)))
@@ -766,6 +774,7 @@ def _header(args: argparse.Namespace, names: list[str], chapters: list[Any], tot
         "seeds": f"0..{args.runs - 1} per condition"
         + (" (chapter9 --quick: at most 5)" if "chapter9" in names else ""),
         "wall time": ("?" if total is None else f"{total:.0f} s ({total / 60:.1f} min)")
+        + (f" in {sittings} sittings (--resume; the sum of the chapters' times)" if sittings > 1 else "")
         + ", "
         + ", ".join(f"{c.name} {secs(c.seconds)}" for c in chapters),
         "executed on": _where(args),
@@ -824,9 +833,45 @@ def report_only(args: argparse.Namespace) -> int:
             )
             continue
         chapters.append(_chapter_report(name, res, out, seconds, args.quick))
-    md, page = report.write_report(chapters, _header(args, names, chapters, meta.get("total")), args.out)
+    md, page = report.write_report(
+        chapters, _header(args, names, chapters, meta.get("total"), int(meta.get("sittings", 1))), args.out
+    )
     print(f"{md} and {page} rewritten from the results in {args.out}/")
     return 0
+
+
+def _earlier_run(out: str, settings: dict[str, Any]) -> dict[str, Any] | None:
+    """The run.json of the run `--resume` continues, or None (and why, on stderr) when it cannot."""
+    path = os.path.join(out, "run.json")
+    if not os.path.exists(path):
+        return {}  # nothing to keep: a fresh run
+    try:
+        with open(path) as f:
+            earlier = json.load(f)
+    except (OSError, ValueError) as e:
+        print(f"sme reproduce: --resume cannot read {path}: {e}", file=sys.stderr)
+        return None
+    if earlier.get("settings") != settings:
+        was = earlier.get("settings") or "unrecorded settings"
+        print(
+            f"sme reproduce: --resume: {out}/ holds a run with {was}, not {settings}; rerun with the same "
+            "--runs/--quick, or give another --out",
+            file=sys.stderr,
+        )
+        return None
+    return dict(earlier)
+
+
+def _kept_chapter(out: str, name: str, info: dict[str, Any] | None) -> dict | None:
+    """A chapter's results.json from the earlier run, when that run finished it; else None (run it again)."""
+    if not info or info.get("error"):
+        return None
+    try:
+        with open(os.path.join(out, name, "results.json")) as f:
+            res = json.load(f)
+    except (OSError, ValueError):
+        return None
+    return res if isinstance(res, dict) and "markdown" in res else None
 
 
 def main_all(args: argparse.Namespace) -> int:
@@ -842,13 +887,21 @@ def main_all(args: argparse.Namespace) -> int:
         return 2
     os.makedirs(args.out, exist_ok=True)
     t_all = time.time()
+    settings = {"runs": args.runs, "quick": bool(args.quick)}
+    meta: dict[str, Any] = {"chapters": {}, "total": None, "settings": settings, "sittings": 1}
+    if getattr(args, "resume", False):
+        earlier = _earlier_run(args.out, settings)
+        if earlier is None:
+            return 2
+        meta["chapters"] = {k: v for k, v in earlier.get("chapters", {}).items() if not v.get("error")}
+        meta["sittings"] = int(earlier.get("sittings", 1)) + 1
     print(
         f"sme reproduce all: {len(names)} chapters, {args.runs} runs each{' (quick)' if args.quick else ''}, "
         f"{_where(args)}, writing {args.out}/ ...",
         flush=True,
     )
     chapters: list[report.ChapterReport] = []
-    meta: dict[str, Any] = {"chapters": {}, "total": None}
+    kept_seconds = 0.0
 
     def save_meta() -> None:  # after every chapter: a run cut short still leaves its times
         with open(os.path.join(args.out, "run.json"), "w") as f:
@@ -856,6 +909,14 @@ def main_all(args: argparse.Namespace) -> int:
 
     for i, name in enumerate(names, 1):
         title = report.CHAPTER_ROWS[name][0]
+        kept = _kept_chapter(args.out, name, meta["chapters"].get(name))
+        if kept is not None:
+            seconds = meta["chapters"][name]["seconds"]
+            kept_seconds += seconds
+            chapters.append(_chapter_report(name, kept, os.path.join(args.out, name), seconds, args.quick))
+            print(f"[{i}/{len(names)}] {name}: kept from the earlier run ({seconds:.0f} s then)", flush=True)
+            continue
+        meta["chapters"].pop(name, None)
         print(f"[{i}/{len(names)}] {name}: {title} ...", flush=True)
         t0 = time.time()
         try:
@@ -881,10 +942,10 @@ def main_all(args: argparse.Namespace) -> int:
             f"[{i}/{len(names)}] {name} done in {seconds:.0f} s ({res['cpu_seconds']:.0f} s of CPU): {verdicts}",
             flush=True,
         )
-    total = time.time() - t_all
+    total = time.time() - t_all + kept_seconds
     meta["total"] = total
     save_meta()
-    md, page = report.write_report(chapters, _header(args, names, chapters, total), args.out)
+    md, page = report.write_report(chapters, _header(args, names, chapters, total, meta["sittings"]), args.out)
     print(f"\n({total:.0f} s; {md} and {page})")
     return 1 if any(c.error for c in chapters) else 0
 
@@ -900,8 +961,9 @@ def main_args(args: argparse.Namespace) -> int:
     if scene != "wall" and args.chapter != "retina":
         print("sme reproduce: --scene applies to the retina chapter only", file=sys.stderr)
         return 2
-    if (getattr(args, "chapters", None) or getattr(args, "report_only", False)) and args.chapter != "all":
-        print("sme reproduce: --chapters and --report-only apply to `all` only", file=sys.stderr)
+    only_all = ("chapters", "report_only", "resume")
+    if any(getattr(args, k, None) for k in only_all) and args.chapter != "all":
+        print("sme reproduce: --chapters, --resume and --report-only apply to `all` only", file=sys.stderr)
         return 2
     if args.chapter == "all":
         return main_all(args)
