@@ -253,12 +253,46 @@ def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
         from sensorimotor.tools.ray_map import ray_map
 
         return ray_map(fn, jobs, _CLUSTER[0])
+    progress = _Progress(len(jobs))
+    results: list[Any] = [None] * len(jobs)
     if workers <= 1:
-        return [fn(*j) for j in jobs]
+        for i, j in enumerate(jobs):
+            results[i] = fn(*j)
+            progress.done()
+        return results
     with mp.get_context("spawn").Pool(workers) as pool:
-        # one job at a time (chunksize 1): starmap's default hands each worker chunks of several
-        # jobs, and a chunk of long ones left one core idle at the end of a chapter
-        return pool.starmap(fn, jobs, chunksize=1)
+        # one job at a time (chunksize 1): a chunk of several long jobs left one core idle at the end
+        # of a chapter; results come back as they finish (for the progress) and are put in job order
+        for i, r in pool.imap_unordered(_indexed, [(fn, i, j) for i, j in enumerate(jobs)], chunksize=1):
+            results[i] = r
+            progress.done()
+    return results
+
+
+def _indexed(task: tuple[Callable, int, tuple]) -> tuple[int, Any]:
+    fn, i, job = task
+    return i, fn(*job)
+
+
+class _Progress:
+    """A line on stderr as a chapter's jobs finish (at most one per 20 s, and the last): a long run is
+    seen to move, with the time to go at the pace so far."""
+
+    def __init__(self, total: int, every: float = 20.0) -> None:
+        self.total, self.every, self.n = total, every, 0
+        self.t0 = self.last = time.time()
+
+    def done(self) -> None:
+        self.n += 1
+        now = time.time()
+        if now - self.last < self.every and self.n < self.total:
+            return
+        self.last = now
+        spent = now - self.t0
+        left = spent / self.n * (self.total - self.n)
+        print(
+            f"    {self.n}/{self.total} jobs done, {spent:.0f} s, about {left:.0f} s to go", file=sys.stderr, flush=True
+        )
 
 
 # --- chapters ------------------------------------------------------------------------------------
