@@ -113,6 +113,19 @@ def test_panda_reach_holds_its_target_and_starts_on_a_lattice_of_hand_positions(
         assert make_program(spec, 0).learner == "planner"
 
 
+def test_panda_gym_start_up_noise_stays_off_stdout():
+    """panda-gym's PyBullet prints `argv[0]=...` from C when it connects; a command's stdout is its
+    own output (here one JSON line)."""
+    pytest.importorskip("panda_gym")
+    import json
+    import subprocess
+
+    cmd = [sys.executable, "-m", "sensorimotor.tools.experiments.gym_embed", "gym:panda_gym:PandaReach-v3"]
+    out = subprocess.run([*cmd, "--steps", "50"], capture_output=True, text=True, timeout=120, check=True)
+    assert "argv[" in out.stderr and "argv[" not in out.stdout
+    assert json.loads(out.stdout)["steps"] == 50
+
+
 def test_module_prefix_imports_the_package_and_unknown_modules_are_clear():
     with pytest.raises(ParamError, match="cannot import 'no_such_pkg'"):
         make_world("gym:no_such_pkg:Thing-v0")

@@ -54,6 +54,7 @@ from gymnasium import spaces
 from sensorimotor.protocol.messages import ActionSpace, GoalRule, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import ParamError, _scalar, option, parse, suggest, table_text, unknown_name
 from sensorimotor.worlds.base import StepResult, World
+from sensorimotor.worlds.quiet import stdout_to_stderr
 from sensorimotor.worlds.registry import GYM_PREFIX
 
 log = logging.getLogger("sme.world")
@@ -392,7 +393,8 @@ class GymWorld(World):
                 make_kw.setdefault("render_width", prm.pixels)
                 make_kw.setdefault("render_height", prm.pixels)
         try:
-            self.env = gym.make(env_id, max_episode_steps=self.max_episode_steps, **make_kw)
+            with stdout_to_stderr():  # C start-up noise (panda-gym's PyBullet: argv[0]=...) is not our output
+                self.env = gym.make(env_id, max_episode_steps=self.max_episode_steps, **make_kw)
         except TypeError as e:  # a keyword the constructor refused after all
             raise ParamError(f"gym:{env_id}: {e}") from None
         except gym.error.Error as e:  # e.g. DependencyNotInstalled (Box2D, MuJoCo, ALE...)
