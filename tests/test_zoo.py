@@ -228,6 +228,22 @@ def test_bench_zoo_quick_reports_every_figure(capsys):
     assert r["worst_ratio"] is not None and r["worst_ratio"] <= 1.5
 
 
+def test_bench_zoo_workers_give_the_same_figures_as_one_process(capsys, monkeypatch):
+    import json
+
+    from sensorimotor.tools.bench import zoo
+
+    tiny = zoo.ZooWorld("tiny", "gym:FrozenLake-v1", {"is_slippery": "false"}, {}, 4_000, 4_000)
+    monkeypatch.setattr(zoo, "ZOO", (tiny,))  # the entry travels with each task to the workers
+    rows = {}
+    for workers in (1, 2):
+        assert zoo.main(seeds=2, quick=True, json_out=True, workers=workers) == 0
+        lines = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+        rows[workers] = [{k: v for k, v in r.items() if "seconds" not in k} for r in lines]
+    assert len(rows[1]) == 3 and rows[1][0]["seed"] == 0 and rows[1][1]["seed"] == 1 and rows[1][2]["summary"]
+    assert rows[1] == rows[2]
+
+
 @pytest.mark.skipif(importlib.util.find_spec("minigrid") is None, reason="minigrid is not installed")
 def test_minigrid_turns_are_found_and_its_map_no_longer_folds():
     from sensorimotor.protocol.messages import EventKind

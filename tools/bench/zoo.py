@@ -217,29 +217,45 @@ def _fmt(v: Any) -> str:
     return "-" if v is None else f"{v:.3f}" if isinstance(v, float) else str(v)
 
 
-def main(seeds: int = 3, quick: bool = False, only: list[str] | None = None, json_out: bool = False) -> int:
-    """Run the zoo; print one line per run and a summary table (or JSON lines)."""
-    import importlib.util
+def _run_task(task: tuple[ZooWorld, int, int]) -> dict[str, Any]:
+    return run_one(*task)
 
-    rows = []
+
+def main(
+    seeds: int = 3, quick: bool = False, only: list[str] | None = None, json_out: bool = False, workers: int = 1
+) -> int:
+    """Run the zoo; print one line per run and a summary table (or JSON lines). With `workers` > 1
+    the runs go to that many processes (each run is seeded: the figures are the same)."""
+    import importlib.util
+    import multiprocessing as mp
+
+    tasks = []
     for z in ZOO:
         if only and not any(o.lower() in z.label.lower() or o == z.world for o in only):
             continue
         if z.needs and importlib.util.find_spec(z.needs) is None:
             print(f"zoo: {z.label}: skipped ({z.needs} is not installed: pip install -e '.[worlds]')", file=sys.stderr)
             continue
-        for seed in range(seeds):
-            r = run_one(z, seed, z.quick_steps if quick else z.steps)
+        tasks += [(z, seed, z.quick_steps if quick else z.steps) for seed in range(seeds)]
+    pool = mp.get_context("spawn").Pool(workers) if workers > 1 and len(tasks) > 1 else None
+    try:
+        runs = pool.imap(_run_task, tasks) if pool is not None else map(_run_task, tasks)
+        rows = []
+        for r in runs:
             rows.append(r)
+            seed = r["seed"]
             if json_out:
                 print(json.dumps({"bench": "zoo", **r}), flush=True)
             else:
                 print(
-                    f"zoo: {z.label} seed {seed}: final {_fmt(r['final_error'])} best {_fmt(r['best_error'])} "
+                    f"zoo: {r['world']} seed {seed}: final {_fmt(r['final_error'])} best {_fmt(r['best_error'])} "
                     f"goal {_fmt(r['goal_reached_fraction'])} ({r['learner']}, {r['steps']} steps, {r['seconds']} s)",
                     file=sys.stderr,
                     flush=True,
                 )
+    finally:
+        if pool is not None:
+            pool.terminate()
     table = summary(rows)
     if json_out:
         for t in table:
@@ -274,7 +290,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help="shorter runs (a smoke test, not the figures)")
     p.add_argument("--world", action="append", metavar="NAME", help="only these entries (label substring or gym: name)")
     p.add_argument("--json", action="store_true", help="one JSON object per run, then per world")
-    p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json))
+    p.add_argument("--workers", type=int, default=1, help="processes the runs are spread over (default 1)")
+    p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json, a.workers))
 
 
 __all__ = ["ZOO", "ZooWorld", "main", "post_convergence", "run_one", "sensor_peers", "summary"]
