@@ -184,3 +184,34 @@ def test_resume_keeps_the_finished_chapters_and_runs_the_rest(tiny_report, tmp_p
         assert json.loads((out / "run.json").read_text()) == meta
     finally:
         mp.undo()
+
+
+_CALLS: list[int] = []
+_FAIL = [True]
+
+
+def _flaky_job(seed):
+    _CALLS.append(seed)
+    if seed == 2 and _FAIL[0]:
+        raise RuntimeError("the machine went away")
+    return {"seed": seed, "value": seed * 1.5}
+
+
+def _flaky(runs, quick, workers, out):
+    res = reproduce._pool_map(_flaky_job, [(s,) for s in range(runs)], workers)
+    return {"markdown": repr(res), "cpu_seconds": 0.0}
+
+
+def test_resume_goes_on_from_the_last_finished_job_of_a_chapter_cut_short(tmp_path, monkeypatch):
+    monkeypatch.setitem(reproduce.ALL, "flaky", _flaky)
+    monkeypatch.setitem(report.CHAPTER_ROWS, "flaky", ("A chapter cut short", lambda res, quick: []))
+    args = ["reproduce", "all", "--runs", "4", "--workers", "1", "--chapters", "flaky", "--out", str(tmp_path)]
+    assert main(args) == 1  # job 2 fails: the chapter fails, jobs 0 and 1 are kept
+    assert _CALLS == [0, 1, 2] and len(list((tmp_path / "flaky" / "jobs").glob("*.pkl"))) == 2
+    _CALLS.clear()
+    _FAIL[0] = False
+    assert main([*args, "--resume"]) == 0
+    assert _CALLS == [2, 3]  # only the jobs that had not finished ran
+    expected = [{"seed": s, "value": s * 1.5} for s in range(4)]
+    assert json.loads((tmp_path / "flaky" / "results.json").read_text())["markdown"] == repr(expected)
+    assert not (tmp_path / "flaky" / "jobs").exists()  # results.json holds them now

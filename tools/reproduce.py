@@ -23,6 +23,7 @@ import contextlib
 import json
 import multiprocessing as mp
 import os
+import shutil
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -245,27 +246,87 @@ def use_cluster(address: str | None) -> Iterator[None]:
         _CLUSTER[0] = before
 
 
+#: where `_pool_map` keeps each finished job's result (a folder, and whether to reuse what is there);
+#: set by `sme reproduce all` for each chapter (see `job_cache`)
+_JOBS: list[tuple[str, bool] | None] = [None]
+
+
+@contextlib.contextmanager
+def job_cache(folder: str, reuse: bool) -> Iterator[None]:
+    """Within the block, `_pool_map` saves each job's result in `folder` as it finishes and, when
+    `reuse`, takes the results already there instead of running those jobs again: a chapter cut
+    short (hours of mountain car) goes on from its last finished job under `--resume`."""
+    before = _JOBS[0]
+    _JOBS[0] = (folder, reuse)
+    try:
+        yield
+    finally:
+        _JOBS[0] = before
+
+
+def _job_path(folder: str, fn: Callable, job: tuple) -> str:
+    import hashlib
+
+    key = hashlib.sha1(f"{fn.__module__}.{fn.__qualname__}{job!r}".encode()).hexdigest()[:20]
+    return os.path.join(folder, f"{fn.__name__}-{key}.pkl")
+
+
+def _save_job(path: str, result: Any) -> None:
+    import pickle
+
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path + ".tmp", "wb") as f:
+        pickle.dump(result, f)
+    os.replace(path + ".tmp", path)  # a run killed while writing leaves no half a result
+
+
 def _pool_map(fn: Callable, jobs: list[tuple], workers: int) -> list[Any]:
     """``[fn(*job) for job in jobs]`` in job order: on the Ray cluster of `use_cluster`, else in
     `workers` spawned processes (in this process when 1). Jobs are seeded by their arguments, so
-    every way gives the same results."""
+    every way gives the same results. Under `job_cache`, finished jobs are kept (and reused)."""
+    import pickle
+
+    results: list[Any] = [None] * len(jobs)
+    cache = _JOBS[0]
+    paths = [_job_path(cache[0], fn, j) for j in jobs] if cache else []
+    todo = list(range(len(jobs)))
+    if cache and cache[1]:
+        for i in list(todo):
+            try:
+                with open(paths[i], "rb") as f:
+                    results[i] = pickle.load(f)
+                todo.remove(i)
+            except (OSError, pickle.UnpicklingError, EOFError):
+                pass
+        if len(todo) < len(jobs):
+            print(
+                f"    {len(jobs) - len(todo)}/{len(jobs)} jobs kept from the earlier run", file=sys.stderr, flush=True
+            )
+
+    def finished(i: int, r: Any) -> None:
+        results[i] = r
+        if cache:
+            _save_job(paths[i], r)
+        progress.done()
+
+    progress = _Progress(len(todo))
+    if not todo:
+        return results
     if _CLUSTER[0] is not None:
         from sensorimotor.tools.ray_map import ray_map
 
-        return ray_map(fn, jobs, _CLUSTER[0])
-    progress = _Progress(len(jobs))
-    results: list[Any] = [None] * len(jobs)
+        for i, r in zip(todo, ray_map(fn, [jobs[i] for i in todo], _CLUSTER[0]), strict=True):
+            finished(i, r)
+        return results
     if workers <= 1:
-        for i, j in enumerate(jobs):
-            results[i] = fn(*j)
-            progress.done()
+        for i in todo:
+            finished(i, fn(*jobs[i]))
         return results
     with mp.get_context("spawn").Pool(workers) as pool:
         # one job at a time (chunksize 1): a chunk of several long jobs left one core idle at the end
         # of a chapter; results come back as they finish (for the progress) and are put in job order
-        for i, r in pool.imap_unordered(_indexed, [(fn, i, j) for i, j in enumerate(jobs)], chunksize=1):
-            results[i] = r
-            progress.done()
+        for i, r in pool.imap_unordered(_indexed, [(fn, i, jobs[i]) for i in todo], chunksize=1):
+            finished(i, r)
     return results
 
 
@@ -768,13 +829,15 @@ def _run_chapter(
     out = os.path.join(args.out, name)
     os.makedirs(out, exist_ok=True)
     t0, cpu0 = time.time(), cpu_seconds()
-    with use_cluster(getattr(args, "cluster", None)):
+    jobs = os.path.join(out, "jobs")
+    with use_cluster(getattr(args, "cluster", None)), job_cache(jobs, bool(getattr(args, "resume", False))):
         res = fn(args.runs, args.quick, args.workers, out)
     res.setdefault("cpu_seconds", cpu_seconds() - cpu0)
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(res, f, default=float)
     with open(os.path.join(out, "table.md"), "w") as f:
         f.write(res["markdown"] + "\n")
+    shutil.rmtree(jobs, ignore_errors=True)  # the chapter's results.json holds them now
     return res, out, time.time() - t0
 
 
