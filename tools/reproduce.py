@@ -991,7 +991,8 @@ def main_all(args: argparse.Namespace) -> int:
         if earlier is None:
             return 2
         meta["chapters"] = {k: v for k, v in earlier.get("chapters", {}).items() if not v.get("error")}
-        meta["sittings"] = int(earlier.get("sittings", 1)) + 1
+        if earlier:  # a fresh folder under --resume is the first sitting
+            meta["sittings"] = int(earlier.get("sittings", 1)) + 1
     print(
         f"sme reproduce all: {len(names)} chapters, {args.runs} runs each{' (quick)' if args.quick else ''}, "
         f"{_where(args)}, writing {args.out}/ ...",

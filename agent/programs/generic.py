@@ -136,7 +136,10 @@ class GenericProgramParams:
     planner_every: int = option(250, "planner: transitions between plans (value iteration over the model)", min=1)
     planner_epsilon: float = option(0.05, "planner: random-action rate while learning", min=0.0, max=1.0)
     planner_effort: float = option(
-        0.01, "planner: cost per unit of squared action size (the smaller of equally quick actions)", min=0.0
+        0.3,
+        "planner: cost of the largest action, in steps (of two actions whose cost-to-go differs by less, the "
+        "smaller: the plan's interpolated values are that uncertain, and traces become a function of the start)",
+        min=0.0,
     )
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     distance: str = option(
