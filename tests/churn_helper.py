@@ -49,8 +49,9 @@ def churn(endpoint: str, n: int, batch: int, steps: int, prefix: str) -> None:
     print("churn done", flush=True)
 
 
-def flood(endpoint: str, wid: str, seconds: float) -> None:
-    """Publish distinct observation steps of gridworld `wid` without waiting for answers."""
+def flood(endpoint: str, wid: str, seconds: float, messages: int) -> None:
+    """Publish distinct observation steps of gridworld `wid` without waiting for answers: for
+    `seconds`, or until `messages` were sent (the same flood on a fast machine as on a slow one)."""
     world = GridWorld(wid, seed=0)
     session = "flood"
     spec = codec.encode(replace(world.spec(), world_id=wid, session=session))
@@ -78,7 +79,7 @@ def flood(endpoint: str, wid: str, seconds: float) -> None:
             cycle.append(p)
             lock.advance(Action(wid, lock.step, (float(rng.integers(4)),)))
         sent, t0 = 0, time.monotonic()
-        while time.monotonic() - t0 < seconds:
+        while time.monotonic() - t0 < seconds and sent < messages:
             p = cycle[sent % len(cycle)]
             p.step = sent
             pub.put(p.SerializeToString())
@@ -106,11 +107,12 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=50)
     p.add_argument("--prefix", default="c")
     p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument("--messages", type=int, default=4_000_000)
     a = p.parse_args()
     if a.mode == "churn":
         churn(a.connect, a.n, a.batch, a.steps, a.prefix)
     else:
-        flood(a.connect, f"{a.prefix}flood", a.seconds)
+        flood(a.connect, f"{a.prefix}flood", a.seconds, a.messages)
 
 
 if __name__ == "__main__":

@@ -105,24 +105,39 @@ with Bus(BusConfig(mode="peer", connect=("{ea_c}", "{eb_c}"), config_file="{leas
     def refused() -> dict[str, int]:
         return {n: agent(n)["counters"].get("lease_refused", 0) for n in ("a", "b")}
 
+    def lost() -> int:
+        return sum(agent(n)["counters"].get("lease_lost", 0) for n in ("a", "b"))
+
+    def counters() -> dict:
+        return {n: agent(n)["counters"] for n in ("a", "b")}
+
     # one world each, both answered
     assert wait_for(lambda: len(answering("a")) == 1 and len(answering("b")) == 1, 150, every=1.0), bus()
     before = {**answering("a"), **answering("b")}
-    refused_before = refused()
+    refused_before, lost_before = refused(), lost()
 
     # cut the link between the agents' hosts only: A-C and B-C stay up
     _, vx, _, _, _ = hosts.links[2]
     ip("-n", hosts.ns["A"], "link", "set", vx, "down")
     t_cut = time.time()
-    # each agent stops seeing the other's claims and claims its worlds too: the worlds refuse the lease
-    assert wait_for(lambda: all(refused()[n] > refused_before[n] for n in "ab"), 40, every=0.5), bus()
+    # each agent stops seeing the other's claims and claims its worlds too: the worlds refuse the lease.
+    # Or, on a loaded machine, a holder is silent for the grace after its token vanished on one path:
+    # the world then grants the lease to the other agent and the former holder is told it lost it
+    # (seen in CI, 2 of ~20 runs). Either way one owner per lease, which the world's counts check below.
+    def cut_noticed() -> bool:
+        both_refused = all(refused()[n] > refused_before[n] for n in "ab")
+        return both_refused or lost() > lost_before
+
+    assert wait_for(cut_noticed, 40, every=0.5), (counters(), bus())
+    assert wait_for(lambda: set(answering("a")) | set(answering("b")) == set(worlds), 20, every=0.5), bus()
     cut_seen = {**answering("a"), **answering("b")}
     time.sleep(4)  # the split lasts: the worlds keep being answered by their lease holders
     during = {**answering("a"), **answering("b")}
-    assert set(during) == set(worlds) and all(during[w] > cut_seen[w] > before[w] for w in worlds), (
+    assert set(during) == set(worlds) and all(during[w] > cut_seen[w] for w in worlds), (
         before,
         cut_seen,
         during,
+        counters(),
     )
     assert not set(answering("a")) & set(answering("b")), bus()  # no world answered by both
 
