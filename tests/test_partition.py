@@ -120,6 +120,7 @@ with Bus(BusConfig(mode="peer", connect=("{ea_c}", "{eb_c}"), config_file="{leas
     _, vx, _, _, _ = hosts.links[2]
     ip("-n", hosts.ns["A"], "link", "set", vx, "down")
     t_cut = time.time()
+
     # each agent stops seeing the other's claims and claims its worlds too: the worlds refuse the lease.
     # Or, on a loaded machine, a holder is silent for the grace after its token vanished on one path:
     # the world then grants the lease to the other agent and the former holder is told it lost it
