@@ -22,7 +22,10 @@ The learner follows the observation (`learner=auto`; the attach event says which
   and value iteration over that grid with the value interpolated between nodes, optimistic about
   nodes never met (`agent.learners.model_planner`). The model generalises across the actions a
   model-free learner would have to try one by one, and its plan is the shortest way under the
-  model (the smaller of equally quick moves), so traces are a function of the start.
+  model (the smaller of equally quick moves), so traces are a function of the start. A camera
+  frame (a sensor of two or more axes) with such actions is planned over too, in *motor
+  coordinates*: the first `motor_warmup` random moves fit a map from the frames to coordinates
+  whose differences are the actions sent (`agent.learners.motor_map`), and the plan runs over them.
 * ``lspi`` - anything else (images, long vectors): flattened, scaled by the sensors' ranges,
   randomly projected to at most `projection` dimensions, reduced by PCA fitted on a reservoir
   sample, fed through Gaussian radial basis functions (ch. 6: PCA + RBF), LSPI over random samples.
@@ -58,6 +61,7 @@ the policy relearned from fresh experience and the next embedding says `relearne
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 from dataclasses import dataclass
 from typing import Any
@@ -70,6 +74,7 @@ from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean
 from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
+from sensorimotor.agent.learners.motor_map import MotorMap, fit_motor_map
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.goal import failed, reached
@@ -140,6 +145,15 @@ class GenericProgramParams:
         "planner: cost of the largest action, in steps (of two actions whose cost-to-go differs by less, the "
         "smaller: the plan's interpolated values are that uncertain, and traces become a function of the start)",
         min=0.0,
+    )
+    motor_warmup: int = option(
+        3000,
+        "planner over camera frames: random moves whose transitions fit the motor coordinates (the planner's "
+        "state: see agent.learners.motor_map)",
+        min=10,
+    )
+    motor_components: int = option(
+        32, "planner over camera frames: principal components of the frames the motor map is built on", min=1
     )
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     distance: str = option(
@@ -380,6 +394,28 @@ def embed_job(
     return {"coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
 
 
+def motor_job(
+    before: np.ndarray,
+    actions: np.ndarray,
+    after: np.ndarray,
+    starts: np.ndarray,
+    components: int,
+    seed: int,
+) -> dict[str, Any]:
+    """Fit the motor map (`agent.learners.motor_map`) on the warm-up's transitions and measure,
+    in its coordinates, the range the random moves covered and the range of the starts met."""
+    m = fit_motor_map(before, actions, after, components=components, seed=seed)
+    z = m(np.vstack([before, after]))
+    zs = m(starts) if len(starts) else z
+    return {
+        "map": m.state(),
+        "seen_lo": z.min(axis=0),
+        "seen_hi": z.max(axis=0),
+        "start_lo": zs.min(axis=0),
+        "start_hi": zs.max(axis=0),
+    }
+
+
 def _sweep_score(reached: list[bool], traces: list[list[int]]) -> tuple[float, float]:
     """How good a sweep's policy is, without truth: the fraction of starts that reach the goal, and
     the mean length of the traces that do (shorter is better: every learner learns shortest paths)."""
@@ -420,14 +456,15 @@ class GenericProgram(Program):
             np.dtype(s.dtype).kind in "iub" and 0 <= s.high - s.low + 1 <= prm.symbol_values for s in spec.sensors
         )
         d = sum(int(np.prod(s.shape)) for s in spec.sensors)
+        frames = any(len(s.shape) >= 2 for s in spec.sensors)  # a camera: its frames are planned over by motor map
+        box = not spec.action_space.discrete and len(spec.action_space.low) >= 2
         learner = prm.learner
         if learner == "auto":
-            box = not spec.action_space.discrete and len(spec.action_space.low) >= 2
             learner = (
                 "tabular"
                 if ids or symbols
                 else "planner"
-                if box and d <= prm.planner_max_dims
+                if box and (d <= prm.planner_max_dims or frames)
                 else "sarsa"
                 if d <= prm.sarsa_max_dims
                 else "lspi"
@@ -444,6 +481,18 @@ class GenericProgram(Program):
         hi = np.concatenate([np.full(int(np.prod(s.shape)), s.high, float) for s in spec.sensors])
         span = np.where(hi > lo, hi - lo, 1.0)
         self._lo, self._span = lo, span
+        # planner over more values than it can grid: motor coordinates of the frames (one per action value)
+        self.motor = learner == "planner" and d > prm.planner_max_dims
+        if self.motor and not box:
+            raise SpecMismatch(
+                f"generic program: learner planner over {d} observed values needs a box action of 2+ values "
+                "(its motor coordinates are the moves sent)"
+            )
+        self._raw_lo, self._raw_span = lo, span
+        self._motor_map: MotorMap | None = None
+        self._motor_data: list[tuple[np.ndarray, int, np.ndarray]] = []  # warm-up transitions
+        self._motor_starts: list[np.ndarray] = []  # warm-up frames at an episode's start
+        self._motor_prev: tuple[np.ndarray, int] | None = None
         basis: Any
         self.sarsa: SarsaLambda | None = None
         self.planner: ModelPlanner | None = None
@@ -475,6 +524,9 @@ class GenericProgram(Program):
             self._warm = 0
         elif learner == "planner":
             self.n_states = 0
+            if self.motor:
+                d = self.actions.shape[1]
+                self._lo, self._span = np.zeros(d), np.ones(d)
             grid = prm.planner_grid or max(2, min(16, int(np.floor(4096 ** (1.0 / d) + 1e-9))))
             self.planner = ModelPlanner(
                 d,
@@ -563,7 +615,8 @@ class GenericProgram(Program):
             + (", hashed tiles" if self.sarsa and self.sarsa.coder.hashed else ""),
             "lspi": "LSPI over PCA + RBF features",
             "planner": f"a learned local-linear model and interpolated value iteration, "
-            f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes",
+            f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes"
+            + (", over motor coordinates of the frames" if self.motor else ""),
         }[self.learner]
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
@@ -573,10 +626,17 @@ class GenericProgram(Program):
 
     # observations -> states --------------------------------------------------------------------
     def _vector(self, obs: Observation) -> np.ndarray:
+        if self.motor:
+            assert self._motor_map is not None
+            return (self._motor_map(self._raw(obs)) - self._lo) / self._span
         x = (self._flat(obs) - self._lo) / self._span
         if self.learner == "lspi" and self._proj is not None:
             return x @ self._proj
         return x
+
+    def _raw(self, obs: Observation) -> np.ndarray:
+        """The observation scaled by the sensors' declared ranges (what the motor map takes)."""
+        return (self._flat(obs) - self._raw_lo) / self._raw_span
 
     def _flat(self, obs: Observation) -> np.ndarray:
         parts = []
@@ -746,7 +806,10 @@ class GenericProgram(Program):
         self.emit_lspi_iteration(self.lspi, result["change"], step)
 
     def _key(self, obs: Observation) -> bytes:
-        return b"".join(np.ascontiguousarray(obs.tensors[s.name]).tobytes() for s in self.spec.sensors)
+        """The observation's bytes; a digest of them when longer than 64 (a camera frame: the
+        transitions remembered would otherwise hold two frames each)."""
+        key = b"".join(np.ascontiguousarray(obs.tensors[s.name]).tobytes() for s in self.spec.sensors)
+        return key if len(key) <= 64 else hashlib.blake2b(key, digest_size=16).digest()
 
     def _choose(self, obs: Observation, trace: list[int]) -> int:
         if not trace:
@@ -1095,25 +1158,77 @@ class GenericProgram(Program):
             self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
         self._warm += 1
         if self._warm >= self.params.sarsa_warmup:
-            lo, hi = self._seen_lo, self._seen_hi
-            span = np.where(hi > lo, hi - lo, 1.0)
-            self._lo, self._span = lo - 0.1 * span, 1.2 * span
-            if self.planner is not None:
-                # the planner's grid is spent where traces run: over the span of the start states
-                # met, widened by half of it on each side (random walks wander far wider); a value
-                # the starts do not vary keeps the range the walks showed
-                s_lo, s_hi = self._start_lo, self._start_hi
-                s_span = s_hi - s_lo
-                wide = np.isfinite(s_span) & (s_span > 1e-6 * np.maximum(span, 1e-12))
-                self._lo = np.where(wide, s_lo - 0.5 * s_span, self._lo)
-                self._span = np.where(wide, 2.0 * s_span, self._span)
+            self._set_ranges()
         if obs.done:
             return Decision(reset=True, start=-1)
         return Decision(tuple(float(v) for v in self.actions[int(self.rng.integers(self.n_actions))]))
 
+    def _set_ranges(self) -> None:
+        """Lay the tiles (or the planner's grid) over the ranges the warm-up measured."""
+        lo, hi = self._seen_lo, self._seen_hi
+        span = np.where(hi > lo, hi - lo, 1.0)
+        self._lo, self._span = lo - 0.1 * span, 1.2 * span
+        if self.planner is not None:
+            # the planner's grid is spent where traces run: over the span of the start states
+            # met, widened by half of it on each side (random walks wander far wider); a value
+            # the starts do not vary keeps the range the walks showed
+            s_lo, s_hi = self._start_lo, self._start_hi
+            s_span = s_hi - s_lo
+            wide = np.isfinite(s_span) & (s_span > 1e-6 * np.maximum(span, 1e-12))
+            self._lo = np.where(wide, s_lo - 0.5 * s_span, self._lo)
+            self._span = np.where(wide, 2.0 * s_span, self._span)
+
+    def _motor_warmup(self, obs: Observation) -> Decision:
+        """A random move whose transition is kept; after `motor_warmup` of them the motor map is
+        fitted off the act path (random moves go on meanwhile), then the planner's ranges are
+        measured in its coordinates over the warm-up's frames and starts."""
+        assert self.background is not None
+        for name, result in self.background.tick():
+            if name == "motor":
+                self._install_motor(result)
+        if self._motor_map is not None:
+            return self.act(obs)
+        x = self._raw(obs).astype(np.float32)
+        if self.background.pending("motor"):
+            pass  # random moves while the map is fitted
+        elif len(self._motor_data) < self.params.motor_warmup:
+            if obs.t > 0 and self._motor_prev is not None:
+                self._motor_data.append((self._motor_prev[0], self._motor_prev[1], x))
+            elif obs.t == 0 and len(self._motor_starts) < 4 * self.spec.n_starts + 64:
+                self._motor_starts.append(x)
+        elif not self.background.pending("motor"):
+            self.background.submit(
+                "motor",
+                motor_job,
+                before=np.array([t[0] for t in self._motor_data]),
+                actions=self.actions[[t[1] for t in self._motor_data]],
+                after=np.array([t[2] for t in self._motor_data]),
+                starts=np.array(self._motor_starts),
+                components=self.params.motor_components,
+                seed=int(self.rng.integers(2**31)),
+            )
+            self._motor_data, self._motor_starts = [], []  # the job holds them now
+        self._warm += 1
+        if obs.done:
+            self._motor_prev = None
+            return Decision(reset=True, start=-1)
+        a = int(self.rng.integers(self.n_actions))
+        self._motor_prev = (x, a)
+        return Decision(tuple(float(v) for v in self.actions[a]))
+
+    def _install_motor(self, result: dict[str, Any]) -> None:
+        self._motor_map = MotorMap.from_state(result["map"])
+        self._seen_lo, self._seen_hi = result["seen_lo"], result["seen_hi"]
+        self._start_lo, self._start_hi = result["start_lo"], result["start_hi"]
+        self._set_ranges()
+        self._warm = max(self._warm, self.params.sarsa_warmup)
+        self._motor_prev = None
+
     def act(self, obs: Observation) -> Decision:
         assert self.background is not None
         continuous = self.sarsa is not None or self.planner is not None
+        if self.motor and self._motor_map is None:
+            return self._motor_warmup(obs)
         if continuous and self._warm < self.params.sarsa_warmup:
             return self._warmup(obs)
         if self.phase == "explore" and self.planner is not None:
@@ -1303,6 +1418,9 @@ class GenericProgram(Program):
             out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy())
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
             out.update(lo=self._lo.copy(), span=self._span.copy())
+            # a checkpoint while the motor map's transitions are collected keeps none: they are
+            # collected again (a fit in flight is kept, with them, as every background job is)
+            out["motor_map"] = None if self._motor_map is None else self._motor_map.state()
         if self.sarsa is not None:
             out["sarsa"] = self.sarsa.state()
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
@@ -1371,6 +1489,9 @@ class GenericProgram(Program):
             self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
             self._lo = np.asarray(state["lo"], dtype=np.float64)
             self._span = np.asarray(state["span"], dtype=np.float64)
+            mm = state.get("motor_map")
+            self._motor_map = None if mm is None else MotorMap.from_state(mm)
+            self._motor_data, self._motor_starts, self._motor_prev = [], [], None
         if self.sarsa is not None:
             self.sarsa.restore(state["sarsa"])
             self._warm = int(state["warm"])
