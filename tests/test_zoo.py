@@ -286,3 +286,59 @@ def test_slippery_frozenlake_is_embedded_from_mean_traces_of_a_long_horizon_poli
     e = run.embeddings[0]
     assert e.metrics["stochastic"] == 1.0 and e.metrics["samples_per_start"] == 64.0
     assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: 0.71 (docs/zoo.md)
+
+
+class Spot(gym.Env):
+    """A camera that sees a spot (16 x 16 grey frames, never the position): the agent sends moves
+    of the spot (a 2-value box, 0.05 per unit) and succeeds within 0.06 of the centre."""
+
+    def __init__(self) -> None:
+        self.observation_space = gym.spaces.Box(0, 255, (16, 16), np.uint8)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.p = np.full(2, 0.2)
+
+    def frame(self) -> np.ndarray:
+        g = (np.arange(16) + 0.5) / 16
+        yy, xx = np.meshgrid(g, g, indexing="ij")
+        return (255 * np.exp(-((xx - self.p[0]) ** 2 + (yy - self.p[1]) ** 2) / (2 * 0.12**2))).astype(np.uint8)
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.p = np.full(2, 0.2)
+        return self.frame(), {"is_success": False}
+
+    def step(self, a):
+        self.p = np.clip(self.p + 0.05 * np.clip(np.asarray(a, float), -1, 1), 0.05, 0.95)
+        ok = bool(np.linalg.norm(self.p - 0.5) < 0.06)
+        return self.frame(), 0.0, ok, False, {"is_success": ok}
+
+
+SPOT_STARTS = np.array(
+    [(x, y) for x in np.linspace(0.2, 0.8, 5) for y in np.linspace(0.2, 0.8, 5) if (x, y) != (0.5, 0.5)]
+)
+
+
+def _put(env, p):
+    env.unwrapped.p = np.array(p, dtype=float)
+    return env.unwrapped.frame()
+
+
+def test_camera_frames_with_box_moves_are_planned_over_motor_coordinates_and_embedded():
+    """A world seen only through a camera (the panda-gym pixels case, small): the program fits motor
+    coordinates from its first random moves, plans over them, and the net moves embed the starts."""
+    gym.register("zoo-test/Spot-v0", entry_point=lambda: EmbeddableEnv(Spot(), SPOT_STARTS, _put, SPOT_STARTS))
+    with make_world("gym:zoo-test/Spot-v0", "spot", 0, {"max_episode_steps": "60"}) as w:
+        spec = w.spec()
+        assert spec.goal == "success" and spec.sensors[0].shape == (16, 16)
+        program = make_program(spec, 0, distance="net", motor_warmup=1500, embed_every=2000)
+        assert program.learner == "planner" and "motor coordinates" in program.describe()
+        run = run_inprocess(w, program, 12_000)
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert embs and embs[-1].metrics["goal_reached_fraction"] == 1.0, [e.metrics for e in embs]
+    assert embs[-1].procrustes_error < 0.05, [e.procrustes_error for e in embs]
+    assert not run.events("drop_detected")
+    # the fitted map is part of the program's state: a restored program sees the same coordinates
+    twin = make_program(spec, 0, distance="net", motor_warmup=1500, embed_every=2000)
+    twin.restore(program.state())
+    frames = np.array([_put(type("Env", (), {"unwrapped": Spot()})(), p).reshape(-1) / 255.0 for p in SPOT_STARTS])
+    assert twin._motor_map is not None and np.array_equal(twin._motor_map(frames), program._motor_map(frames))

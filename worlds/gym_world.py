@@ -81,6 +81,13 @@ class GymWorldParams:
         choices=("state", "pixels"),
     )
     pixels: int = option(64, "observe=pixels: frame side in pixels (grey)", min=8, max=512)
+    camera_distance: float = option(
+        1.0,
+        "observe=pixels, panda-gym: metres from the held target to the camera (panda-gym's own view, "
+        "1.4 m from the base, leaves the hand's 30 cm cube a sixth of the frame)",
+        min=0.3,
+        max=5.0,
+    )
     hand_velocity: bool = option(False, "panda-gym: serve the hand's velocity too, beside its position")
     headings: int = option(
         1,
@@ -450,7 +457,7 @@ class GymWorld(World):
             n = self.params.pixels
 
             def frame(_: Any) -> dict[str, np.ndarray]:
-                return {"pixels": _grey(self.env.render(), n)}
+                return {"pixels": _grey(self._panda_frame(n) if self._family == "panda" else self.env.render(), n)}
 
             return frame, (SensorSpec("pixels", "uint8", (n, n), 0.0, 255.0, f"{self.env_id} rendered frame, grey"),)
         space = self.env.observation_space
@@ -645,6 +652,27 @@ class GymWorld(World):
             f"{len(points)} hand positions on a {n}x{n}x{n} lattice (inverse kinematics), "
             f"target held at its centre {np.round(self._goal, 3).tolist()}"
         )
+
+    def _panda_frame(self, n: int) -> np.ndarray:
+        """panda-gym's camera (yaw 45, pitch -30, field of view 60) aimed at the held target from
+        `camera_distance`, without shadows: pybullet's TinyRenderer spends about 40 % of a frame on them
+        (`sme bench world` measures the frame rate), and they move with the arm, not the hand."""
+        import pybullet as p
+
+        pc = self.u.sim.physics_client
+        view = pc.computeViewMatrixFromYawPitchRoll(
+            cameraTargetPosition=self._goal.tolist(),
+            distance=self.params.camera_distance,
+            yaw=45,
+            pitch=-30,
+            roll=0,
+            upAxisIndex=2,
+        )
+        proj = pc.computeProjectionMatrixFOV(fov=60, aspect=1.0, nearVal=0.1, farVal=100.0)
+        _, _, rgba, _, _ = pc.getCameraImage(
+            n, n, view, proj, shadow=False, renderer=p.ER_TINY_RENDERER, flags=p.ER_NO_SEGMENTATION_MASK
+        )
+        return np.asarray(rgba, dtype=np.uint8).reshape(n, n, 4)[..., :3]
 
     def _grid_starts(self, grid: StateGrid) -> str:
         n = self.params.start_grid
