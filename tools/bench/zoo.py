@@ -70,7 +70,13 @@ ZOO: tuple[ZooWorld, ...] = (
         "panda_gym",
     ),
     ZooWorld(
-        "PandaReach (pixels)", "gym:panda_gym:PandaReach-v3", {"observe": "pixels"}, {}, 60_000, 10_000, "panda_gym"
+        "PandaReach (pixels), net move",
+        "gym:panda_gym:PandaReach-v3",
+        {"observe": "pixels"},
+        {"distance": "net"},
+        60_000,
+        10_000,
+        "panda_gym",
     ),
 )
 
