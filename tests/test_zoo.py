@@ -22,6 +22,7 @@ from sensorimotor.protocol.params import ParamError
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.gym_world import EmbeddableEnv
 from sensorimotor.worlds.registry import make_world
+from tests.spot_env import SPOT_STARTS, Spot
 
 
 def _obs(**kw) -> Observation:
@@ -288,46 +289,10 @@ def test_slippery_frozenlake_is_embedded_from_mean_traces_of_a_long_horizon_poli
     assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: 0.71 (docs/zoo.md)
 
 
-class Spot(gym.Env):
-    """A camera that sees a spot (16 x 16 grey frames, never the position): the agent sends moves
-    of the spot (a 2-value box, 0.05 per unit) and succeeds within 0.06 of the centre."""
-
-    def __init__(self) -> None:
-        self.observation_space = gym.spaces.Box(0, 255, (16, 16), np.uint8)
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
-        self.p = np.full(2, 0.2)
-
-    def frame(self) -> np.ndarray:
-        g = (np.arange(16) + 0.5) / 16
-        yy, xx = np.meshgrid(g, g, indexing="ij")
-        return (255 * np.exp(-((xx - self.p[0]) ** 2 + (yy - self.p[1]) ** 2) / (2 * 0.12**2))).astype(np.uint8)
-
-    def reset(self, seed=None, options=None):
-        super().reset(seed=seed)
-        self.p = np.full(2, 0.2)
-        return self.frame(), {"is_success": False}
-
-    def step(self, a):
-        self.p = np.clip(self.p + 0.05 * np.clip(np.asarray(a, float), -1, 1), 0.05, 0.95)
-        ok = bool(np.linalg.norm(self.p - 0.5) < 0.06)
-        return self.frame(), 0.0, ok, False, {"is_success": ok}
-
-
-SPOT_STARTS = np.array(
-    [(x, y) for x in np.linspace(0.2, 0.8, 5) for y in np.linspace(0.2, 0.8, 5) if (x, y) != (0.5, 0.5)]
-)
-
-
-def _put(env, p):
-    env.unwrapped.p = np.array(p, dtype=float)
-    return env.unwrapped.frame()
-
-
 def test_camera_frames_with_box_moves_are_planned_over_motor_coordinates_and_embedded():
     """A world seen only through a camera (the panda-gym pixels case, small): the program fits motor
     coordinates from its first random moves, plans over them, and the net moves embed the starts."""
-    gym.register("zoo-test/Spot-v0", entry_point=lambda: EmbeddableEnv(Spot(), SPOT_STARTS, _put, SPOT_STARTS))
-    with make_world("gym:zoo-test/Spot-v0", "spot", 0, {"max_episode_steps": "60"}) as w:
+    with make_world("gym:tests.spot_env:zoo-test/Spot-v0", "spot", 0) as w:
         spec = w.spec()
         assert spec.goal == "success" and spec.sensors[0].shape == (16, 16)
         program = make_program(spec, 0, distance="net", motor_warmup=1500, embed_every=2000)
@@ -340,5 +305,5 @@ def test_camera_frames_with_box_moves_are_planned_over_motor_coordinates_and_emb
     # the fitted map is part of the program's state: a restored program sees the same coordinates
     twin = make_program(spec, 0, distance="net", motor_warmup=1500, embed_every=2000)
     twin.restore(program.state())
-    frames = np.array([_put(type("Env", (), {"unwrapped": Spot()})(), p).reshape(-1) / 255.0 for p in SPOT_STARTS])
+    frames = np.array([Spot().frame_at(p).reshape(-1) / 255.0 for p in SPOT_STARTS])
     assert twin._motor_map is not None and np.array_equal(twin._motor_map(frames), program._motor_map(frames))

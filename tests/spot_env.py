@@ -1,0 +1,60 @@
+"""A world seen only through a camera, small enough for tests: `gym:tests.spot_env:zoo-test/Spot-v0`
+(importing this module registers it, as a user's own package would; the repository root must be
+on the path, e.g. PYTHONPATH=.). The panda-gym pixels case in miniature: box moves of a spot, 16 x 16
+grey frames, start states and truth declared by the `EmbeddableEnv` hook."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sensorimotor.worlds.gym_world import EmbeddableEnv
+
+SPOT_STARTS = np.array(
+    [(x, y) for x in np.linspace(0.2, 0.8, 5) for y in np.linspace(0.2, 0.8, 5) if (x, y) != (0.5, 0.5)]
+)
+
+
+class Spot(gym.Env):
+    """A camera that sees a spot (16 x 16 grey frames, never the position): the agent sends moves
+    of the spot (a 2-value box, 0.05 per unit) and succeeds within 0.06 of the centre."""
+
+    def __init__(self) -> None:
+        self.observation_space = gym.spaces.Box(0, 255, (16, 16), np.uint8)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.p = np.full(2, 0.2)
+
+    @staticmethod
+    def frame_at(p: np.ndarray) -> np.ndarray:
+        g = (np.arange(16) + 0.5) / 16
+        yy, xx = np.meshgrid(g, g, indexing="ij")
+        return (255 * np.exp(-((xx - p[0]) ** 2 + (yy - p[1]) ** 2) / (2 * 0.12**2))).astype(np.uint8)
+
+    def frame(self) -> np.ndarray:
+        return self.frame_at(self.p)
+
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self.p = np.full(2, 0.2)
+        return self.frame(), {"is_success": False}
+
+    def step(self, a: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        self.p = np.clip(self.p + 0.05 * np.clip(np.asarray(a, float), -1, 1), 0.05, 0.95)
+        ok = bool(np.linalg.norm(self.p - 0.5) < 0.06)
+        return self.frame(), 0.0, ok, False, {"is_success": ok}
+
+
+def _put(env: gym.Env, p: np.ndarray) -> np.ndarray:
+    spot: Any = env.unwrapped
+    spot.p = np.array(p, dtype=float)
+    return spot.frame()
+
+
+if "zoo-test/Spot-v0" not in gym.registry:
+    gym.register(
+        "zoo-test/Spot-v0",
+        entry_point=lambda: EmbeddableEnv(Spot(), SPOT_STARTS, _put, SPOT_STARTS),
+        max_episode_steps=60,
+    )
