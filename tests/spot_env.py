@@ -21,8 +21,11 @@ class Spot(gym.Env):
     """A camera that sees a spot (16 x 16 grey frames, never the position): the agent sends moves
     of the spot (a 2-value box, 0.05 per unit) and succeeds within 0.06 of the centre."""
 
-    def __init__(self) -> None:
-        self.observation_space = gym.spaces.Box(0, 255, (16, 16), np.uint8)
+    def __init__(self, camera: bool = True) -> None:
+        self.camera = camera  # False: the spot's position is observed instead (zoo-test/SpotState-v0)
+        self.observation_space = (
+            gym.spaces.Box(0, 255, (16, 16), np.uint8) if camera else gym.spaces.Box(0.0, 1.0, (2,), np.float32)
+        )
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.p = np.full(2, 0.2)
 
@@ -33,7 +36,7 @@ class Spot(gym.Env):
         return (255 * np.exp(-((xx - p[0]) ** 2 + (yy - p[1]) ** 2) / (2 * 0.12**2))).astype(np.uint8)
 
     def frame(self) -> np.ndarray:
-        return self.frame_at(self.p)
+        return self.frame_at(self.p) if self.camera else self.p.astype(np.float32)
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
@@ -52,9 +55,10 @@ def _put(env: gym.Env, p: np.ndarray) -> np.ndarray:
     return spot.frame()
 
 
-if "zoo-test/Spot-v0" not in gym.registry:
-    gym.register(
-        "zoo-test/Spot-v0",
-        entry_point=lambda: EmbeddableEnv(Spot(), SPOT_STARTS, _put, SPOT_STARTS),
-        max_episode_steps=60,
-    )
+for _id, _camera in (("zoo-test/Spot-v0", True), ("zoo-test/SpotState-v0", False)):
+    if _id not in gym.registry:
+        gym.register(
+            _id,
+            entry_point=lambda camera=_camera: EmbeddableEnv(Spot(camera), SPOT_STARTS, _put, SPOT_STARTS),
+            max_episode_steps=60,
+        )

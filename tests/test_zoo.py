@@ -307,3 +307,14 @@ def test_camera_frames_with_box_moves_are_planned_over_motor_coordinates_and_emb
     twin.restore(program.state())
     frames = np.array([Spot().frame_at(p).reshape(-1) / 255.0 for p in SPOT_STARTS])
     assert twin._motor_map is not None and np.array_equal(twin._motor_map(frames), program._motor_map(frames))
+
+
+def test_gain_replays_the_accepted_traces_and_measures_how_far_a_command_moves_the_body():
+    """`gym_embed --gain`: on a body whose moves are exactly 0.05 x the command, the gain found is
+    that, and the net moves embed the starts as well as the displacements sensed."""
+    from sensorimotor.tools.experiments.gym_embed import main
+
+    out = main("gym:tests.spot_env:zoo-test/SpotState-v0", 8_000, 0, program_params={"distance": "net"}, gain=True)
+    g = out["gain"]
+    assert g["sensor"] == "observation" and np.allclose(g["gain"], 0.05 * np.eye(2), atol=0.002), g
+    assert g["procrustes_net_vs_displacement"] < 0.01 and out["final_error"] < 0.05, out

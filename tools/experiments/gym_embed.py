@@ -3,6 +3,13 @@ embedding against the world's truth (the figure for `sme world gym:...` in the R
 
     python -m sensorimotor.tools.experiments.gym_embed gym:MountainCar-v0 --steps 60000 \\
         --program-param max_trace=200
+
+`--gain` (box actions, a world whose first sensor is where the body is, e.g. panda-gym's hand
+position): after the run, the accepted policy's traces are replayed from every start and the net
+move commanded is compared with the displacement sensed: the least-squares gain between them (how
+far a unit command along each axis moved the body), and the Procrustes errors of the net moves
+against the displacements and of the displacements against the truth - what a trace embedding in
+units of the commands can reach on that body.
 """
 
 from __future__ import annotations
@@ -14,6 +21,9 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
+from sensorimotor.agent.embedding import procrustes_error
 from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol.params import ParamError, assignments
 from sensorimotor.tools.inprocess import run_inprocess
@@ -26,13 +36,16 @@ def main(
     seed: int = 0,
     params: Mapping[str, Any] | None = None,
     program_params: Mapping[str, Any] | None = None,
+    gain: bool = False,
 ) -> dict[str, Any]:
-    """Run the generic program on `world` for `steps` steps; the errors of its embeddings."""
+    """Run the generic program on `world` for `steps` steps; the errors of its embeddings (and
+    with `gain`, `net_gain` of its accepted traces)."""
     with make_world(world, None, seed, params) as w:
         program = make_program(w.spec(), seed, **dict(program_params or {}))
         t0 = time.perf_counter()
         run = run_inprocess(w, program, steps)
         seconds = time.perf_counter() - t0
+        extra = {"gain": net_gain(w, program)} if gain else {}
     errors = [e for e in run.errors if e is not None]
     return {
         "world": world,
@@ -46,6 +59,37 @@ def main(
         "best_error": round(min(errors), 4) if errors else None,
         "goal_reached_fraction": [round(e.metrics.get("goal_reached_fraction", 0.0), 3) for e in run.embeddings],
         "mean_trace_length": [round(e.metrics.get("mean_trace_length", 0.0), 1) for e in run.embeddings],
+        **extra,
+    }
+
+
+def net_gain(world: Any, program: Any) -> dict[str, Any]:
+    """Replay the accepted policy's trace from every start of `world` (deterministic worlds) and
+    compare each trace's net commanded move with the displacement of the world's first sensor."""
+    traces = program._accepted_traces
+    truth = world.truth()
+    if traces is None or truth is None or program.discrete:
+        return {"error": "needs box actions, start states with truth, and an accepted policy"}
+    name = world.spec().sensors[0].name
+    net, disp = [], []
+    for k, t in enumerate(traces):
+        x0 = np.asarray(world.reset(start=k).tensors[name], dtype=np.float64).reshape(-1)
+        x = x0
+        for a in t:
+            x = np.asarray(world.step(program.actions[a]).tensors[name], dtype=np.float64).reshape(-1)
+        net.append(
+            program.actions[np.asarray(t, dtype=np.int64)].sum(axis=0) if t else np.zeros(program.actions.shape[1])
+        )
+        disp.append(x - x0)
+    N, D = np.array(net), np.array(disp)
+    G = np.linalg.lstsq(np.c_[N, np.ones(len(N))], D, rcond=None)[0][:-1]
+    pos = np.asarray(truth.tensors["positions"], dtype=np.float64)
+    return {
+        "sensor": name,
+        "gain": np.round(G, 4).tolist(),
+        "procrustes_net_vs_displacement": round(procrustes_error(D, N), 4),
+        "procrustes_truth_vs_displacement": round(procrustes_error(pos, D), 4),
+        "procrustes_truth_vs_net": round(procrustes_error(pos, N), 4),
     }
 
 
@@ -56,9 +100,17 @@ def cli(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--param", action="append", metavar="K=V", help="world parameter, repeatable")
     p.add_argument("--program-param", action="append", metavar="K=V", help="program parameter, repeatable")
+    p.add_argument("--gain", action="store_true", help="replay the accepted traces: net move commanded vs sensed")
     a = p.parse_args(argv)
     try:
-        out = main(a.world, a.steps, a.seed, assignments(a.param), assignments(a.program_param, "--program-param"))
+        out = main(
+            a.world,
+            a.steps,
+            a.seed,
+            assignments(a.param),
+            assignments(a.program_param, "--program-param"),
+            gain=a.gain,
+        )
     except ParamError as e:
         print(f"gym_embed: {e}", file=sys.stderr)
         return 2
