@@ -1196,7 +1196,7 @@ class GenericProgram(Program):
                 self._motor_data.append((self._motor_prev[0], self._motor_prev[1], x))
             elif obs.t == 0 and len(self._motor_starts) < 4 * self.spec.n_starts + 64:
                 self._motor_starts.append(x)
-        elif not self.background.pending("motor"):
+        else:
             self.background.submit(
                 "motor",
                 motor_job,
