@@ -80,6 +80,23 @@ def test_box_actions_are_served_and_learned_by_sarsa_over_the_continuous_values(
     assert any(e.metrics["goal_reached_fraction"] > 0 for e in embs)
 
 
+def test_action_scale_narrows_the_discretised_moves_about_the_middle_of_the_box():
+    spec = WorldSpec(
+        "w",
+        "box",
+        (SensorSpec("x", "float32", (2,), 0.0, 1.0),),
+        ActionSpace(low=(-1.0, 0.0), high=(1.0, 4.0)),
+        n_starts=1,
+    )
+    full = make_program(spec, 0).actions
+    half = make_program(spec, 0, action_scale=0.5).actions
+    assert full.shape == half.shape == (9, 2)
+    assert sorted(set(full[:, 1])) == [0.0, 2.0, 4.0] and sorted(set(half[:, 0])) == [-0.5, 0.0, 0.5]
+    assert sorted(set(half[:, 1])) == [1.0, 2.0, 3.0]  # about the middle, not about zero
+    with pytest.raises(ParamError, match="action_scale"):
+        make_program(spec, 0, action_scale=0.0)
+
+
 def test_dict_observations_lose_only_what_cannot_be_flattened():
     pytest.importorskip("minigrid")
     with make_world("gym:MiniGrid-Empty-8x8-v0", None, 0) as w:  # found without "minigrid:"

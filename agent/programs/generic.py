@@ -156,6 +156,13 @@ class GenericProgramParams:
         32, "planner over camera frames: principal components of the frames the motor map is built on", min=1
     )
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
+    action_scale: float = option(
+        1.0,
+        "box actions: the discretised values span this fraction of each bound, about the box's middle "
+        "(smaller moves: finer traces, for a body that follows small moves more faithfully)",
+        min=0.01,
+        max=1.0,
+    )
     distance: str = option(
         "padded",
         "box actions: padded sum (Eq 3.1) or dtw between the continuous traces, or net: the distance "
@@ -203,14 +210,18 @@ class GenericProgramParams:
     )
 
 
-def _action_table(spec: WorldSpec, levels: int) -> np.ndarray:
-    """The action values the program chooses among: (n_actions, dims)."""
+def _action_table(spec: WorldSpec, levels: int, scale: float = 1.0) -> np.ndarray:
+    """The action values the program chooses among: (n_actions, dims); box values span `scale`
+    of each bound about the box's middle."""
     a = spec.action_space
     if a.discrete:
         return np.arange(a.n, dtype=np.float64)[:, None]
     if len(a.low) > 4:
         raise SpecMismatch(f"generic program: {len(a.low)} action dimensions; at most 4 are discretised")
-    grids = [np.linspace(lo, hi, levels) for lo, hi in zip(a.low, a.high, strict=True)]
+    grids = [
+        (lo + hi) / 2 + scale * (np.linspace(lo, hi, levels) - (lo + hi) / 2)
+        for lo, hi in zip(a.low, a.high, strict=True)
+    ]
     return np.array(list(itertools.product(*grids)), dtype=np.float64)
 
 
@@ -441,7 +452,7 @@ class GenericProgram(Program):
         self.params = prm = parse(GenericProgramParams, overrides, name=self.name, base=params)
         if not spec.sensors:
             raise SpecMismatch(f"generic program: world {spec.world_id} declares no sensors")
-        self.actions = _action_table(spec, prm.action_levels)
+        self.actions = _action_table(spec, prm.action_levels, prm.action_scale)
         self.n_actions = self.actions.shape[0]
         self.discrete = spec.action_space.discrete
         self.goal = str(spec.goal)
