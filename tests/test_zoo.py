@@ -335,3 +335,5 @@ def test_gain_replays_the_accepted_traces_and_measures_how_far_a_command_moves_t
     g = out["gain"]
     assert g["sensor"] == "observation" and np.allclose(g["gain"], 0.05 * np.eye(2), atol=0.002), g
     assert g["procrustes_net_vs_displacement"] < 0.01 and out["final_error"] < 0.05, out
+    # every step moves exactly 0.05 x its command, wherever the body is: mean 1, spread 0
+    assert np.allclose(g["step_gain"]["mean"], 1.0, atol=0.05) and max(g["step_gain"]["sd"]) < 0.05, g

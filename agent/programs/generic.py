@@ -30,7 +30,9 @@ The learner follows the observation (`learner=auto`; the attach event says which
   randomly projected to at most `projection` dimensions, reduced by PCA fitted on a reservoir
   sample, fed through Gaussian radial basis functions (ch. 6: PCA + RBF), LSPI over random samples.
 
-Box action spaces are discretised into `action_levels` values per dimension; their traces are the
+Box action spaces are discretised into `action_levels` values per dimension, spanning `action_scale`
+of each bound (a hand that follows small moves more faithfully than large ones draws finer traces
+with half moves: panda-gym's, `docs/zoo.md`); their traces are the
 continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time warping
 (`distance=dtw`, with a cost per repeated step so trace length stays in it), or by the distance
 between their sums (`distance=net`: the net move commanded, blind to the order of the moves, for

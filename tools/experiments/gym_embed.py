@@ -9,7 +9,9 @@ position): after the run, the accepted policy's traces are replayed from every s
 move commanded is compared with the displacement sensed: the least-squares gain between them (how
 far a unit command along each axis moved the body), and the Procrustes errors of the net moves
 against the displacements and of the displacements against the truth - what a trace embedding in
-units of the commands can reach on that body.
+units of the commands can reach on that body - and `step_gain`: how faithfully a single step
+follows its command (mean and spread, per action value, of each step's move over the move the
+gain predicts; a spread well above 0 is a body whose response depends on where it is).
 """
 
 from __future__ import annotations
@@ -71,12 +73,15 @@ def net_gain(world: Any, program: Any) -> dict[str, Any]:
     if traces is None or truth is None or program.discrete:
         return {"error": "needs box actions, start states with truth, and an accepted policy"}
     name = world.spec().sensors[0].name
-    net, disp = [], []
+    net, disp, sent, moved = [], [], [], []
     for k, t in enumerate(traces):
         x0 = np.asarray(world.reset(start=k).tensors[name], dtype=np.float64).reshape(-1)
         x = x0
         for a in t:
+            before = x
             x = np.asarray(world.step(program.actions[a]).tensors[name], dtype=np.float64).reshape(-1)
+            sent.append(program.actions[a])
+            moved.append(x - before)
         net.append(
             program.actions[np.asarray(t, dtype=np.int64)].sum(axis=0) if t else np.zeros(program.actions.shape[1])
         )
@@ -87,10 +92,27 @@ def net_gain(world: Any, program: Any) -> dict[str, Any]:
     return {
         "sensor": name,
         "gain": np.round(G, 4).tolist(),
+        "step_gain": step_gain(np.array(sent), np.array(moved), G),
         "procrustes_net_vs_displacement": round(procrustes_error(D, N), 4),
         "procrustes_truth_vs_displacement": round(procrustes_error(pos, D), 4),
         "procrustes_truth_vs_net": round(procrustes_error(pos, N), 4),
     }
+
+
+def step_gain(sent: np.ndarray, moved: np.ndarray, gain: np.ndarray) -> dict[str, list[float]]:
+    """How faithfully one step follows its command, per action value: the step's move along the
+    value's axis of `gain`, over the move the whole-trace gain predicts (1 on a body whose steps
+    all move alike), its mean and spread over the steps that command it."""
+    if sent.size == 0 or moved.ndim != 2 or gain.shape != (sent.shape[1], moved.shape[1]):
+        return {"mean": [], "sd": []}
+    mean, sd = [], []
+    for i in range(sent.shape[1]):
+        axis = gain[i] / max(float(np.linalg.norm(gain[i])), 1e-12)
+        on = sent[:, i] != 0
+        r = (moved[on] @ axis) / (sent[on, i] * np.linalg.norm(gain[i])) if on.any() else np.zeros(0)
+        mean.append(round(float(r.mean()), 3) if r.size else float("nan"))
+        sd.append(round(float(r.std()), 3) if r.size else float("nan"))
+    return {"mean": mean, "sd": sd}
 
 
 def cli(argv: Sequence[str] | None = None) -> int:
