@@ -70,10 +70,10 @@ ZOO: tuple[ZooWorld, ...] = (
         "panda_gym",
     ),
     ZooWorld(
-        "PandaReach (pixels), net move, half moves",
+        "PandaReach (pixels), net move",
         "gym:panda_gym:PandaReach-v3",
         {"observe": "pixels"},
-        {"distance": "net", "action_scale": 0.5},
+        {"distance": "net"},
         60_000,
         10_000,
         "panda_gym",
