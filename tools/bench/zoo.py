@@ -64,7 +64,7 @@ ZOO: tuple[ZooWorld, ...] = (
         "PandaReach (state), net move, half moves",
         "gym:panda_gym:PandaReach-v3",
         {},
-        {"distance": "net", "action_scale": 0.5},
+        {"distance": "net", "action_scale": "0.5"},
         60_000,
         15_000,
         "panda_gym",
