@@ -99,19 +99,20 @@ def net_gain(world: Any, program: Any) -> dict[str, Any]:
     }
 
 
-def step_gain(sent: np.ndarray, moved: np.ndarray, gain: np.ndarray) -> dict[str, list[float]]:
+def step_gain(sent: np.ndarray, moved: np.ndarray, gain: np.ndarray) -> dict[str, list[float | None]]:
     """How faithfully one step follows its command, per action value: the step's move along the
     value's axis of `gain`, over the move the whole-trace gain predicts (1 on a body whose steps
-    all move alike), its mean and spread over the steps that command it."""
+    all move alike), its mean and spread over the steps that command it (None: never commanded)."""
     if sent.size == 0 or moved.ndim != 2 or gain.shape != (sent.shape[1], moved.shape[1]):
         return {"mean": [], "sd": []}
-    mean, sd = [], []
+    mean: list[float | None] = []
+    sd: list[float | None] = []
     for i in range(sent.shape[1]):
-        axis = gain[i] / max(float(np.linalg.norm(gain[i])), 1e-12)
+        norm = max(float(np.linalg.norm(gain[i])), 1e-12)
         on = sent[:, i] != 0
-        r = (moved[on] @ axis) / (sent[on, i] * np.linalg.norm(gain[i])) if on.any() else np.zeros(0)
-        mean.append(round(float(r.mean()), 3) if r.size else float("nan"))
-        sd.append(round(float(r.std()), 3) if r.size else float("nan"))
+        r = (moved[on] @ (gain[i] / norm)) / (sent[on, i] * norm)
+        mean.append(round(float(r.mean()), 3) if r.size else None)
+        sd.append(round(float(r.std()), 3) if r.size else None)
     return {"mean": mean, "sd": sd}
 
 
