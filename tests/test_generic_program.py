@@ -124,3 +124,54 @@ def test_generic_program_detects_reversed_moves_and_relearns():
     relearned = run.embeddings[i]
     assert relearned.drop_step == drops[0].step and run.events(EventKind.RELEARNED)
     assert relearned.procrustes_error < 0.1 and max(run.errors[i + 1 :]) < 0.05, run.errors
+
+
+class Jittery(Beacons):
+    """Beacons whose every start state, once `jitter` is sent, fails its next episode once (the
+    walker stuck in place): a world that is not bit-repeatable, tipping a trace off its goal."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.armed, self.failed, self.stuck = False, set(), False
+
+    def reset(self, seed=None, start=None) -> StepResult:
+        self.stuck = self.armed and start is not None and start >= 0 and start not in self.failed
+        if self.stuck:
+            self.failed.add(start)
+        return super().reset(seed, start)
+
+    def step(self, action) -> StepResult:
+        if self.stuck:
+            self.t += 1
+            return self._obs(done=self.t >= 50)
+        return super().step(action)
+
+    def perturb(self, control: Control) -> str:
+        self.armed = True
+        return "every start fails once"
+
+
+def _jitter_run(doubt: bool):
+    world = Jittery()
+    program = make_program(world.spec(), 0, samples_per_iteration=150)
+    if not doubt:
+        program._in_doubt = lambda start, trace, ok: False
+    run = run_inprocess(
+        world,
+        program,
+        6_000,
+        detector=make_detector("cusum", **program.detector_params),
+        perturb=lambda k: Control("b", "jitter") if k == 3_000 else None,
+    )
+    return world, run
+
+
+def test_a_goal_missed_once_is_run_again_before_it_counts_as_a_drop():
+    world, run = _jitter_run(doubt=True)
+    assert len(world.failed) == world.n**2  # every start had its one stuck episode
+    assert not run.events(EventKind.DROP_DETECTED)
+    late = [e for e in run.embeddings if e.step > 3_000]
+    assert max(e.metrics["retried_traces"] for e in late) >= 1, [e.metrics for e in late]
+    assert all(e.metrics["goal_reached_fraction"] == 1.0 for e in late)
+    _, blind = _jitter_run(doubt=False)  # without the second run the same world reads as a drop
+    assert blind.events(EventKind.DROP_DETECTED)

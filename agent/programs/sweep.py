@@ -35,6 +35,8 @@ class StartStateSweep:
         self._start = 0
         self._trace: list[int] = []
         self._restart = False
+        self._retried = False  # the trace in progress is a second run of a doubted one
+        self.retries = 0  # doubted traces run again
 
     def begin(self, order: list[int] | None = None) -> Decision:
         """The first decision of a sweep: reset the world to its first start state. `order`: visit the
@@ -55,15 +57,25 @@ class StartStateSweep:
         obs: Observation,
         choose: Callable[[Observation, list[int]], int],
         stop: Callable[[Observation, list[int]], bool] | None = None,
+        doubt: Callable[[int, list[int], bool], bool] | None = None,
     ) -> Decision:
         """Answer one observation of the sweep: the next action of the trace, or a reset to the next
-        start state when the trace ends (`finished` after the last one).
+        start state when the trace ends (`finished` after the last one). A trace that
+        `doubt(start, trace, reached)` doubts is not kept: its start state is run once more and the
+        second trace is kept, whatever it is (a world that is not bit-repeatable can fail a goal
+        once by a hair: a simulator's contacts).
         """
         if self._restart or (obs.t == 0 and obs.start != self._start_of(self._start)):
             self._restart = False  # the world or the agent restarted mid-trace: this start state again
             return Decision(reset=True, start=self._start_of(self._start))
         if obs.done or len(self._trace) >= self.max_trace or (stop is not None and stop(obs, self._trace)):
             ok = bool(self.goal(obs) or (obs.done and not self._trace))
+            if doubt is not None and not self._retried and doubt(self._start_of(self._start), self._trace, ok):
+                self._retried = True
+                self.retries += 1
+                self._trace = []
+                return Decision(reset=True, start=self._start_of(self._start))
+            self._retried = False
             self.rewarded += int(ok)
             self.reached.append(ok)
             self.traces.append(self._trace)
@@ -98,6 +110,8 @@ class StartStateSweep:
             "start": self._start,
             "trace": list(self._trace),
             "restart": self._restart,
+            "retried": self._retried,
+            "retries": self.retries,
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -115,6 +129,7 @@ class StartStateSweep:
         self.started = [int(v) for v in state.get("started", [])]
         self._start, self._trace = int(state["start"]), [int(a) for a in state["trace"]]
         self._restart = bool(state["restart"])
+        self._retried, self.retries = bool(state.get("retried", False)), int(state.get("retries", 0))
 
     def interrupted(self) -> None:
         """The world or the agent restarted: the trace in progress starts again, from a reset."""
