@@ -326,6 +326,33 @@ def test_camera_frames_with_box_moves_are_planned_over_motor_coordinates_and_emb
     assert twin._motor_map is not None and np.array_equal(twin._motor_map(frames), program._motor_map(frames))
 
 
+def test_warm_up_moves_span_motor_scale_while_the_plan_moves_span_action_scale():
+    """`motor_scale=1` with `action_scale=0.5`: the motor map is fitted from whole random moves (a
+    clearer change of the frame), the plan then moves by halves over the coordinates it gave."""
+    with make_world("gym:tests.spot_env:zoo-test/Spot-v0", "spot", 0) as w:
+        params = dict(distance="net", action_scale="0.5", motor_scale="1", motor_warmup="1500", embed_every="2000")
+        program = make_program(w.spec(), 0, **params)
+        sent: list[tuple[bool, float]] = []
+        act = program.act
+
+        def recorded(obs):  # type: ignore[no-untyped-def]
+            warm = program._motor_map is None
+            d = act(obs)
+            if d.values:
+                sent.append((warm, float(np.max(np.abs(d.values)))))
+            return d
+
+        program.act = recorded  # type: ignore[method-assign]
+        run = run_inprocess(w, program, 12_000)
+    warm, plan = [m for w_, m in sent if w_], [m for w_, m in sent if not w_]
+    # the largest axis of each move: the bound (or 0 for the move that stays put), then half of it
+    assert len(warm) >= 1500 and set(warm) == {0.0, 1.0}, (len(warm), set(warm))
+    assert plan and set(plan) <= {0.0, 0.5} and 0.5 in plan, set(plan)
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert embs and embs[-1].metrics["goal_reached_fraction"] == 1.0, [e.metrics for e in embs]
+    assert embs[-1].procrustes_error < 0.05, [e.procrustes_error for e in embs]
+
+
 def test_gain_replays_the_accepted_traces_and_measures_how_far_a_command_moves_the_body():
     """`gym_embed --gain`: on a body whose moves are exactly 0.05 x the command, the gain found is
     that, and the net moves embed the starts as well as the displacements sensed."""
