@@ -615,8 +615,12 @@ class GymWorld(World):
     def _panda_starts(self) -> str:
         """A cube lattice of hand positions as wide as the task's goal range, centred on the held
         target and lifted so that its lowest layer clears the table by the reach tolerance (a hand
-        resting on the table moves by contact, which pybullet does not repeat exactly)."""
+        resting on the table moves by contact). Contacts are made repeatable: pybullet orders the
+        overlapping pairs of its broadphase by the history of the simulation unless told to sort
+        them, so the same moves from the same start pressed the hand on the table differently from
+        one episode to the next (`sensorimotor.tools.experiments.repeatable` measures it)."""
         u: Any = self.u
+        u.sim.physics_client.setPhysicsEngineParameter(deterministicOverlappingPairs=1)
         lo, hi = np.asarray(u.task.goal_range_low, float), np.asarray(u.task.goal_range_high, float)
         clearance = float(getattr(u.task, "distance_threshold", 0.05))
         side = hi - lo
