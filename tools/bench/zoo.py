@@ -71,15 +71,6 @@ ZOO: tuple[ZooWorld, ...] = (
         "panda_gym",
     ),
     ZooWorld(
-        "PandaReach (pixels), net move",
-        "gym:panda_gym:PandaReach-v3",
-        {"observe": "pixels"},
-        {"distance": "net"},
-        60_000,
-        10_000,
-        "panda_gym",
-    ),
-    ZooWorld(
         "PandaReach (pixels), half moves, whole-move warm-up",
         "gym:panda_gym:PandaReach-v3",
         {"observe": "pixels"},
