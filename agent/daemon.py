@@ -40,7 +40,7 @@ from sensorimotor.agent.checkpoint_store import MAX_SHARED_BYTES, SharedCheckpoi
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.lease import LeaseClient, Outcome, lost_by
 from sensorimotor.agent.link import WorldLink, check_truth
-from sensorimotor.agent.ownership import OwnerBook, claim_key, plan
+from sensorimotor.agent.ownership import OwnerBook, TokenAudit, claim_key, plan
 from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, make_program
 from sensorimotor.agent.rate_limit import TokenBucket
 from sensorimotor.protocol import codec, keys
@@ -215,6 +215,7 @@ class AgentDaemon:
             "lease_lost": 0,  # worlds that applied another owner's actions: stopped answering them
             "unfenced": 0,  # attaches to worlds without a lease queryable (answered with epoch 0)
             "bad_checkpoint": 0,  # checkpoints (shared or in the state dir) refused and set aside
+            "liveliness_mended": 0,  # tokens whose appearance or disappearance zenoh did not report (TokenAudit)
         }
         if link_ttl is not None and link_ttl <= 0:
             raise ValueError(f"link_ttl must be > 0 seconds (or None: never release), not {link_ttl}")
@@ -1157,6 +1158,37 @@ class AgentDaemon:
         if self.workers:
             threading.Thread(target=self._poll_workers, name="poll-workers", daemon=True).start()
         threading.Thread(target=_import_programs, name="import-programs", daemon=True).start()
+        threading.Thread(target=self._audit_liveliness, name="liveliness-audit", daemon=True).start()
+
+    AUDIT_EVERY = 1.0  # seconds between two comparisons of the owner book with a liveliness query
+
+    def _audit_liveliness(self) -> None:
+        """Compare the owner book with liveliness queries every AUDIT_EVERY seconds and report, through
+        the same callbacks as zenoh's events, what two queries in a row agree the events missed
+        (`TokenAudit`: a world that reconnected through another router can stay booked as gone)."""
+        audit = TokenAudit()
+        handlers = {
+            keys.ALL_ALIVE_WORLDS: self._on_alive,
+            keys.ALL_ALIVE_OWNERS: self._on_owner,
+            keys.ALL_CLAIMS: self._on_claim,
+        }
+        while not self._stop.wait(self.AUDIT_EVERY):
+            for expr, handler in handlers.items():
+                try:
+                    alive = self.bus.alive(expr, timeout=1.0, complete=True)
+                except Exception as e:  # noqa: BLE001 - a closing session or a route's error: next time
+                    log.debug("liveliness audit of %s skipped: %s", expr, e)
+                    continue
+                appeared, vanished = audit.check(expr, self.book.tokens()[expr], alive)
+                for key, is_alive in [(k, True) for k in sorted(appeared)] + [(k, False) for k in sorted(vanished)]:
+                    self.counters["liveliness_mended"] += 1
+                    log.info(
+                        "liveliness token %s is %s, but zenoh never said so: taken as %s",
+                        key,
+                        "alive" if is_alive else "gone",
+                        "appeared" if is_alive else "vanished",
+                    )
+                    handler(key, is_alive)
 
     TICK = 0.1  # seconds between two ownership ticks when no world appeared or vanished
     MIN_TICK = 0.02  # when some did or the last tick claimed one: at most one per MIN_TICK (a tick is O(worlds))

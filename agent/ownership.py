@@ -89,6 +89,39 @@ class OwnerBook:
         with self._lock:
             return View(frozenset(self._worlds), frozenset(self._owners), dict(self._claims))
 
+    def tokens(self) -> dict[str, frozenset[str]]:
+        """The token keys the book holds, per liveliness key expression (see `TokenAudit`)."""
+        with self._lock:
+            return {
+                keys.ALL_ALIVE_WORLDS: frozenset(keys.alive_world(w) for w in self._worlds),
+                keys.ALL_ALIVE_OWNERS: frozenset(keys.alive_owner(o) for o in self._owners),
+                keys.ALL_CLAIMS: frozenset(keys.alive_claim(w, o) for w, c in self._claims.items() for o in c),
+            }
+
+
+class TokenAudit:
+    """Mends a book whose liveliness events went missing or came out of order.
+
+    Zenoh reports a token's appearance and disappearance as events; when a router on one of two
+    paths to a client dies and the client reconnects through the other, the disappearance (through
+    the dead router) can be reported after the appearance (through the new one), and the token is
+    then alive but booked as gone: a world nobody claims again. A liveliness query answers from the
+    router's own table, so the book is compared with one now and then. A disagreement counts only
+    when two queries in a row show it, so an event still on its way is never overruled.
+    """
+
+    def __init__(self) -> None:
+        self._seen: dict[str, tuple[frozenset[str], frozenset[str]]] = {}
+
+    def check(self, expr: str, booked: Iterable[str], alive: Iterable[str]) -> tuple[set[str], set[str]]:
+        """(alive but not booked, booked but not alive) for key expression `expr`, each seen by the
+        previous check too."""
+        booked, alive = set(booked), set(alive)
+        appeared, vanished = frozenset(alive - booked), frozenset(booked - alive)
+        before = self._seen.get(expr, (frozenset(), frozenset()))
+        self._seen[expr] = (appeared, vanished)
+        return set(appeared & before[0]), set(vanished & before[1])
+
 
 @dataclass(frozen=True)
 class Plan:

@@ -671,7 +671,7 @@ class Bus:
         self._declared.append(sub)
         return sub
 
-    def alive(self, key: str, timeout: float = 1.0) -> list[str]:
+    def alive(self, key: str, timeout: float = 1.0, complete: bool = False) -> list[str]:
         """The keys of the liveliness tokens matching `key` alive now.
 
         Parameters
@@ -680,12 +680,21 @@ class Bus:
             A key expression (wildcards allowed).
         timeout : float, default=1.0
             Seconds to wait for the answer.
+        complete : bool, default=False
+            Raise BusError when some route answered with an error (the list may then lack tokens)
+            instead of returning what the others answered.
 
         Returns
         -------
         list of str
         """
-        return [str(r.ok.key_expr) for r in self._session.liveliness().get(key, timeout=timeout) if r.ok is not None]
+        out = []
+        for r in self._session.liveliness().get(key, timeout=timeout):
+            if r.ok is not None:
+                out.append(str(r.ok.key_expr))
+            elif complete:
+                raise BusError(f"liveliness query {key}: a route answered with an error")
+        return out
 
     def undeclare(self, entity: Any) -> None:
         """Undeclare a publisher (a `Publisher` or the zenoh one), subscriber, queryable or token made
