@@ -1160,7 +1160,7 @@ class AgentDaemon:
         threading.Thread(target=_import_programs, name="import-programs", daemon=True).start()
         threading.Thread(target=self._audit_liveliness, name="liveliness-audit", daemon=True).start()
 
-    AUDIT_EVERY = 1.0  # seconds between two comparisons of the owner book with a liveliness query
+    AUDIT_EVERY = 0.5  # seconds between two comparisons of the owner book with a liveliness query
 
     def _audit_liveliness(self) -> None:
         """Compare the owner book with liveliness queries every AUDIT_EVERY seconds and report, through
