@@ -190,6 +190,10 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
         "drops": len(drops),
         "retried_traces": int(last.metrics.get("retried_traces", 0.0)) if last else 0,
         **peers,
+        # every version: [step, error, fraction of starts that reached the goal]
+        "versions": [
+            [int(e.step), round(float(e.procrustes_error), 4), e.metrics.get("goal_reached_fraction")] for e in embs
+        ],
     }
 
 
