@@ -1163,32 +1163,26 @@ class AgentDaemon:
     AUDIT_EVERY = 0.5  # seconds between two comparisons of the owner book with a liveliness query
 
     def _audit_liveliness(self) -> None:
-        """Compare the owner book with liveliness queries every AUDIT_EVERY seconds and report, through
-        the same callbacks as zenoh's events, what two queries in a row agree the events missed
-        (`TokenAudit`: a world that reconnected through another router can stay booked as gone)."""
+        """Compare the owner book with liveliness queries every AUDIT_EVERY seconds and book what the
+        events missed (`TokenAudit`: a world that reconnected through another router can stay booked
+        as gone); a world's missed event also goes to the main loop, as zenoh's would have."""
         audit = TokenAudit()
-        handlers = {
-            keys.ALL_ALIVE_WORLDS: self._on_alive,
-            keys.ALL_ALIVE_OWNERS: self._on_owner,
-            keys.ALL_CLAIMS: self._on_claim,
-        }
+        exprs = (keys.ALL_ALIVE_WORLDS, keys.ALL_ALIVE_OWNERS, keys.ALL_CLAIMS)
         while not self._stop.wait(self.AUDIT_EVERY):
-            for expr, handler in handlers.items():
+            for expr in exprs:
+                booked = self.book.tokens()[expr]  # before the query: an event meanwhile shows as touched
                 try:
                     alive = self.bus.alive(expr, timeout=1.0, complete=True)
                 except Exception as e:  # noqa: BLE001 - a closing session or a route's error: next time
                     log.debug("liveliness audit of %s skipped: %s", expr, e)
                     continue
-                appeared, vanished = audit.check(expr, self.book.tokens()[expr], alive)
-                for key, is_alive in [(k, True) for k in sorted(appeared)] + [(k, False) for k in sorted(vanished)]:
+                for key, is_alive, since in audit.check(expr, booked, alive, time.monotonic(), self.book.touched):
+                    if not self.book.mend(expr, key, is_alive, since):
+                        continue
                     self.counters["liveliness_mended"] += 1
-                    log.info(
-                        "liveliness token %s is %s, but zenoh never said so: taken as %s",
-                        key,
-                        "alive" if is_alive else "gone",
-                        "appeared" if is_alive else "vanished",
-                    )
-                    handler(key, is_alive)
+                    log.info("liveliness token %s is %s, but zenoh never said so", key, "alive" if is_alive else "gone")
+                    if expr == keys.ALL_ALIVE_WORLDS:
+                        self._changes.put((keys.last_chunk(key), is_alive))
 
     TICK = 0.1  # seconds between two ownership ticks when no world appeared or vanished
     MIN_TICK = 0.02  # when some did or the last tick claimed one: at most one per MIN_TICK (a tick is O(worlds))

@@ -16,8 +16,9 @@ pure decision made from a snapshot of it, once per tick.
 from __future__ import annotations
 
 import threading
+import time
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from sensorimotor.protocol import keys
@@ -50,30 +51,70 @@ class OwnerBook:
         # immutable per world, so that a view is one shallow copy and lock-free reads see whole sets
         self._claims: dict[str, frozenset[str]] = {}
         self.unclaimed_since: dict[str, float] = {}
+        self._touched: dict[str, float] = {}  # token key -> time.monotonic() of its last event (TokenAudit)
+
+    def _touch(self, key: str) -> None:
+        self._touched[key] = time.monotonic()
+        if len(self._touched) > self.TOUCHED_MAX:  # bounded: forget events older than a minute
+            old = time.monotonic() - 60.0
+            self._touched = {k: t for k, t in self._touched.items() if t >= old}
+
+    TOUCHED_MAX = 16384
+
+    def _world(self, world: str, alive: bool) -> None:
+        (self._worlds.add if alive else self._worlds.discard)(world)
+
+    def _owner(self, owner: str, alive: bool) -> None:
+        (self._owners.add if alive else self._owners.discard)(owner)
+
+    def _claim(self, key: str, alive: bool) -> None:
+        parts = key.split("/")
+        if len(parts) < 2:
+            return
+        world, owner = parts[-2], parts[-1]
+        c = self._claims.get(world, frozenset())
+        c = c | {owner} if alive else c - {owner}
+        if c:
+            self._claims[world] = c
+        else:
+            self._claims.pop(world, None)
 
     def world(self, world: str, alive: bool) -> None:
         """A world's token appeared or vanished."""
         with self._lock:
-            (self._worlds.add if alive else self._worlds.discard)(world)
+            self._world(world, alive)
+            self._touch(keys.alive_world(world))
 
     def owner(self, owner: str, alive: bool) -> None:
         """An owner's token appeared or vanished."""
         with self._lock:
-            (self._owners.add if alive else self._owners.discard)(owner)
+            self._owner(owner, alive)
+            self._touch(keys.alive_owner(owner))
 
     def claim(self, key: str, alive: bool) -> None:
         """A claim token `.../claim/{world}/{owner}` appeared or vanished."""
-        parts = str(key).split("/")
-        if len(parts) < 2:
-            return
-        world, owner = parts[-2], parts[-1]
         with self._lock:
-            c = self._claims.get(world, frozenset())
-            c = c | {owner} if alive else c - {owner}
-            if c:
-                self._claims[world] = c
+            self._claim(str(key), alive)
+            self._touch(str(key))
+
+    def touched(self, key: str) -> float:
+        """When the last event about token `key` came (time.monotonic(); -inf: none remembered)."""
+        return self._touched.get(key, float("-inf"))
+
+    def mend(self, expr: str, key: str, alive: bool, since: float) -> bool:
+        """Book token `key` (of key expression `expr`) as `alive`, as a missed event would have,
+        unless an event about it came after `since`: then the events have spoken since the
+        disagreement was seen, and nothing is changed (False)."""
+        with self._lock:
+            if self._touched.get(key, float("-inf")) > since:
+                return False
+            if expr == keys.ALL_ALIVE_WORLDS:
+                self._world(keys.last_chunk(key), alive)
+            elif expr == keys.ALL_ALIVE_OWNERS:
+                self._owner(keys.last_chunk(key), alive)
             else:
-                self._claims.pop(world, None)
+                self._claim(key, alive)
+            return True
 
     def claimed_by_other(self, world: str, me: str) -> bool:
         """Whether an owner other than `me` claims `world` (lock-free read: for the hot path)."""
@@ -100,27 +141,46 @@ class OwnerBook:
 
 
 class TokenAudit:
-    """Mends a book whose liveliness events went missing or came out of order.
+    """Finds what a book's liveliness events missed or reported out of order.
 
     Zenoh reports a token's appearance and disappearance as events; when a router on one of two
     paths to a client dies and the client reconnects through the other, the disappearance (through
     the dead router) can be reported after the appearance (through the new one), and the token is
     then alive but booked as gone: a world nobody claims again. A liveliness query answers from the
     router's own table, so the book is compared with one now and then. A disagreement counts only
-    when two queries in a row show it, so an event still on its way is never overruled.
+    once every query for `patience` seconds has shown it and no event about the token came in that
+    time (`touched`), so an event still on its way is never overruled; `OwnerBook.mend` applies it
+    only if no event came since either.
+
+    Parameters
+    ----------
+    patience : float, default 1.5
+        Seconds a disagreement must last before it is reported.
     """
 
-    def __init__(self) -> None:
-        self._seen: dict[str, tuple[frozenset[str], frozenset[str]]] = {}
+    def __init__(self, patience: float = 1.5) -> None:
+        if not patience >= 0:
+            raise ValueError(f"patience must be >= 0 seconds, not {patience}")
+        self.patience = float(patience)
+        self._since: dict[str, dict[tuple[str, bool], float]] = {}
 
-    def check(self, expr: str, booked: Iterable[str], alive: Iterable[str]) -> tuple[set[str], set[str]]:
-        """(alive but not booked, booked but not alive) for key expression `expr`, each seen by the
-        previous check too."""
+    def check(
+        self,
+        expr: str,
+        booked: Iterable[str],
+        alive: Iterable[str],
+        now: float,
+        touched: Callable[[str], float] = lambda key: float("-inf"),
+    ) -> list[tuple[str, bool, float]]:
+        """The disagreements on key expression `expr` that have lasted `patience` seconds: (key,
+        alive as the query says, since when), with `touched(key)` the time of the book's last event
+        about the key (a disagreement is timed from the later of the two)."""
         booked, alive = set(booked), set(alive)
-        appeared, vanished = frozenset(alive - booked), frozenset(booked - alive)
-        before = self._seen.get(expr, (frozenset(), frozenset()))
-        self._seen[expr] = (appeared, vanished)
-        return set(appeared & before[0]), set(vanished & before[1])
+        now_seen = [(k, True) for k in alive - booked] + [(k, False) for k in booked - alive]
+        before = self._since.get(expr, {})
+        since = {d: max(before.get(d, now), touched(d[0])) for d in now_seen}
+        self._since[expr] = since
+        return sorted((k, a, t) for (k, a), t in since.items() if now - t >= self.patience)
 
 
 @dataclass(frozen=True)

@@ -77,17 +77,30 @@ def test_owner_book_follows_tokens():
     assert b.view().load("a") == 0
 
 
-def test_token_audit_mends_only_what_two_queries_in_a_row_agree_on():
-    audit = TokenAudit()
+def test_token_audit_reports_only_disagreements_that_lasted_with_no_event_about_them():
+    audit = TokenAudit(patience=1.0)
     w = "sme/v1/alive/world/*"
-    # g2 alive but booked gone, g9 booked but gone: the first query could race an event in flight
-    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}) == (set(), set())
-    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}) == ({"g2"}, {"g9"})
-    # a disagreement the events mended between two queries is not acted on
-    assert audit.check(w, {"g1", "g2"}, {"g1", "g2", "g3"}) == (set(), set())
-    assert audit.check(w, {"g1", "g2", "g3"}, {"g1", "g2", "g3"}) == (set(), set())
+    # g2 alive but booked gone, g9 booked but gone: at first an event could still be on its way
+    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}, now=0.0) == []
+    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}, now=0.5) == []
+    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}, now=1.0) == [("g2", True, 0.0), ("g9", False, 0.0)]
+    # an event about g2 at 1.2 restarts its clock, even though the book still disagrees
+    touched = {"g2": 1.2}.get
+    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}, 1.5, lambda k: touched(k, float("-inf"))) == [("g9", False, 0.0)]
+    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}, 2.2, lambda k: touched(k, float("-inf"))) == [
+        ("g2", True, 1.2),
+        ("g9", False, 0.0),
+    ]
+    # a disagreement the events mended is forgotten; seen again, it waits its patience again
+    assert audit.check(w, {"g1", "g2", "g9"}, {"g1", "g2"}, now=2.5) == [("g9", False, 0.0)]
+    assert audit.check(w, {"g1", "g9"}, {"g1", "g2"}, now=3.0) == [("g9", False, 0.0)]
     # each key expression is its own comparison
-    assert audit.check("sme/v1/alive/owner/*", {"a"}, set()) == (set(), set())
+    assert audit.check("sme/v1/alive/owner/*", {"a"}, set(), now=3.0) == []
+    with pytest.raises(ValueError):
+        TokenAudit(patience=-1)
+
+
+def test_owner_book_mends_a_missed_event_unless_an_event_came_since():
     b = OwnerBook()
     b.world("g1", True)
     b.owner("a", True)
@@ -97,6 +110,15 @@ def test_token_audit_mends_only_what_two_queries_in_a_row_agree_on():
         "sme/v1/alive/owner/*": {"sme/v1/alive/owner/a"},
         "sme/v1/alive/claim/*/*": {"sme/v1/alive/claim/g1/a"},
     }
+    t = b.touched("sme/v1/alive/claim/g1/a")
+    assert t > float("-inf") and b.touched("sme/v1/alive/world/g2") == float("-inf")
+    # the claim's event came after the disagreement was seen: the events have spoken, nothing changes
+    assert not b.mend("sme/v1/alive/claim/*/*", "sme/v1/alive/claim/g1/a", False, since=t - 1.0)
+    assert b.claimants("g1") == {"a"}
+    assert b.mend("sme/v1/alive/claim/*/*", "sme/v1/alive/claim/g1/a", False, since=t)
+    assert b.mend("sme/v1/alive/world/*", "sme/v1/alive/world/g2", True, since=0.0)
+    assert b.mend("sme/v1/alive/owner/*", "sme/v1/alive/owner/a", False, since=t)
+    assert b.view() == View(frozenset({"g1", "g2"}), frozenset(), {})
 
 
 @pytest.mark.integration
@@ -115,13 +137,13 @@ def test_the_daemon_mends_a_book_whose_liveliness_events_went_missing(endpoint):
             assert wait_for(lambda: "g9" in d.book.view().worlds, 10)
             d.book.world("g9", False)  # its appearance never reported
             d.book.world("ghost", True)  # a world whose disappearance never was
-            assert wait_for(lambda: d.counters["liveliness_mended"] == 2, 10), d.counters
+            assert wait_for(lambda: d.counters["liveliness_mended"] == 2, 10), d.counters  # after ~1.5 s
             assert d.book.view().worlds == {"g9"}
             changes = []
             while not d._changes.empty():
                 changes.append(d._changes.get_nowait())
             assert ("g9", True) in changes and ("ghost", False) in changes, changes
-            time.sleep(2.5 * d.AUDIT_EVERY)
+            time.sleep(5 * d.AUDIT_EVERY)
             assert d.counters["liveliness_mended"] == 2  # nothing else to mend
         finally:
             d.stop()
@@ -183,7 +205,9 @@ def test_two_agents_share_four_worlds_then_one_is_killed_and_the_other_resumes_i
         st = status(e2, "b")
         seen = {w: None if (ln := link(st, w)) is None else (ln.state, ln.steps) for w in of_a} if st else None
         # what b did, leaving out its embedding lines; the worlds log warnings only
-        tails = {k: [x.rstrip() for x in v.lines if ": embedding v" not in x][-40:] for k, v in logs.items() if k != "a"}
+        tails = {
+            k: [x.rstrip() for x in v.lines if ": embedding v" not in x][-40:] for k, v in logs.items() if k != "a"
+        }
         tool = procs.start("status", "--json", "--connect", e2)
         bus_view = tool.communicate(timeout=60)[0]
         return json.dumps(

@@ -192,7 +192,8 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
         **peers,
         # every version: [step, error, fraction of starts that reached the goal]
         "versions": [
-            [int(e.step), round(float(e.procrustes_error), 4), e.metrics.get("goal_reached_fraction")] for e in embs
+            [int(e.step), round(float(e.procrustes_error or 0.0), 4), e.metrics.get("goal_reached_fraction")]
+            for e in embs
         ],
     }
 
