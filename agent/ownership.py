@@ -54,10 +54,10 @@ class OwnerBook:
         self._touched: dict[str, float] = {}  # token key -> time.monotonic() of its last event (TokenAudit)
 
     def _touch(self, key: str) -> None:
+        self._touched.pop(key, None)  # re-inserted last: the dict stays in the order of the events
         self._touched[key] = time.monotonic()
-        if len(self._touched) > self.TOUCHED_MAX:  # bounded: forget events older than a minute
-            old = time.monotonic() - 60.0
-            self._touched = {k: t for k, t in self._touched.items() if t >= old}
+        if len(self._touched) > self.TOUCHED_MAX:  # bounded: forget the older half, once per half
+            self._touched = dict(list(self._touched.items())[len(self._touched) // 2 :])
 
     TOUCHED_MAX = 16384
 

@@ -119,6 +119,12 @@ def test_owner_book_mends_a_missed_event_unless_an_event_came_since():
     assert b.mend("sme/v1/alive/world/*", "sme/v1/alive/world/g2", True, since=0.0)
     assert b.mend("sme/v1/alive/owner/*", "sme/v1/alive/owner/a", False, since=t)
     assert b.view() == View(frozenset({"g1", "g2"}), frozenset(), {})
+    # what it remembers of events is bounded: the older half goes, the newest stay
+    b.TOUCHED_MAX = 8
+    for i in range(20):
+        b.world(f"w{i}", True)
+    assert b.touched("sme/v1/alive/world/w19") >= b.touched("sme/v1/alive/world/w15") > float("-inf")
+    assert b.touched("sme/v1/alive/world/w0") == float("-inf") and len(b._touched) <= 8
 
 
 @pytest.mark.integration
