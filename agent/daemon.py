@@ -1169,8 +1169,9 @@ class AgentDaemon:
         audit = TokenAudit()
         exprs = (keys.ALL_ALIVE_WORLDS, keys.ALL_ALIVE_OWNERS, keys.ALL_CLAIMS)
         while not self._stop.wait(self.AUDIT_EVERY):
+            held = self.book.tokens()  # before the queries: an event meanwhile shows as touched
             for expr in exprs:
-                booked = self.book.tokens()[expr]  # before the query: an event meanwhile shows as touched
+                booked = held[expr]
                 try:
                     alive = self.bus.alive(expr, timeout=1.0, complete=True)
                 except Exception as e:  # noqa: BLE001 - a closing session or a route's error: next time
