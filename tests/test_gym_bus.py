@@ -146,3 +146,38 @@ def test_a_world_seen_through_a_camera_is_learned_over_the_bus(procs, endpoint, 
         return link.last_procrustes_error <= 0.018
 
     assert wait_for(learned, 120, every=0.5), seen[-5:]
+
+
+def _embeddings_of(procs, endpoint: str, seconds: float) -> list[dict]:
+    """Every embedding `sme watch --json` prints over the next `seconds`, collected as they arrive."""
+    import json
+    import threading
+
+    watch = procs.start("watch", "--json", "--no-events", "--timeout", str(seconds), "--connect", endpoint)
+    rows: list[dict] = []
+
+    def follow() -> None:
+        for line in watch.stdout:
+            rows.append(json.loads(line))
+
+    threading.Thread(target=follow, daemon=True).start()
+    return rows
+
+
+def test_mountaincar_reaches_its_goal_from_the_declared_starts_over_the_bus(procs, endpoint, monkeypatch):
+    """Classic control, live: in-process the goal is reached from all 81 declared starts by step
+    28,642 (`sme bench zoo --quick --seeds 1 --world gym:MountainCar-v0`; 100 % in every seed of
+    the full bench); over the bus the done-when figure, >= 90 %, with the embedding's Procrustes
+    error and trustworthiness reported beside it."""
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
+    procs.start("agent", "--listen", endpoint, "-q")
+    rows = _embeddings_of(procs, endpoint, 150)
+    procs.start("world", "gym:MountainCar-v0", "--connect", endpoint, "-q")
+
+    def reached() -> bool:
+        return any((r.get("metrics") or {}).get("goal_reached_fraction", 0.0) >= 0.9 for r in rows)
+
+    assert wait_for(reached, 150, every=0.5), [(r["step"], r["metrics"]) for r in rows]
+    good = next(r for r in rows if r["metrics"]["goal_reached_fraction"] >= 0.9)
+    assert good["world"] == "MountainCar-v0" and good["n_points"] == 81
+    assert 0.0 <= good["procrustes_error"] <= 1.0 and good["scores"]["trustworthiness"] > 0.5, good

@@ -324,11 +324,32 @@ def test_camera_frames_with_box_moves_are_planned_over_motor_coordinates_and_emb
     assert embs and embs[-1].metrics["goal_reached_fraction"] == 1.0, [e.metrics for e in embs]
     assert embs[-1].procrustes_error < 0.05, [e.procrustes_error for e in embs]
     assert not run.events("drop_detected")
+    # net moves, once watched: a newer policy is published only when its traces end where their starts
+    # would have them more nearly (`end_disparity`)
+    spreads = [e.metrics["end_disparity"] for e in embs]
+    watched = next(i for i, e in enumerate(embs) if e.metrics["goal_reached_fraction"] >= 0.9)
+    assert all(b <= a + 1e-9 for a, b in itertools.pairwise(spreads[watched:])), spreads
     # the fitted map is part of the program's state: a restored program sees the same coordinates
     twin = make_program(spec, 0, distance="net", motor_warmup=1500, embed_every=2000)
     twin.restore(program.state())
     frames = np.array([Spot().frame_at(p).reshape(-1) / 255.0 for p in SPOT_STARTS])
     assert twin._motor_map is not None and np.array_equal(twin._motor_map(frames), program._motor_map(frames))
+
+
+def test_end_disparity_is_zero_when_traces_end_where_a_similarity_of_their_starts_puts_them():
+    from scipy.spatial import procrustes
+
+    from sensorimotor.agent.programs.generic import end_disparity
+
+    rng = np.random.default_rng(0)
+    starts = rng.standard_normal((10, 3))
+    assert end_disparity({i: (s, np.ones(3)) for i, s in enumerate(starts)}) == pytest.approx(0.0, abs=1e-12)
+    assert end_disparity({i: (s, 0.3 * s + 2.0) for i, s in enumerate(starts)}) == pytest.approx(0.0, abs=1e-12)
+    assert end_disparity({i: (s, s + 5.0) for i, s in enumerate(starts)}) == 1.0  # every trace went the same way
+    ends = rng.standard_normal((10, 3))
+    got = end_disparity({i: (s, e) for i, (s, e) in enumerate(zip(starts, ends, strict=True))})
+    assert got == pytest.approx(procrustes(starts, starts - ends)[2])
+    assert end_disparity({0: (starts[0], ends[0]), 1: (starts[1], ends[1])}) is None
 
 
 def test_warm_up_moves_span_motor_scale_while_the_plan_moves_span_action_scale():

@@ -73,7 +73,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from sensorimotor.agent.embedding import classical_mds, trace_distances
+from sensorimotor.agent.embedding import classical_mds, procrustes_error, trace_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
 from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
@@ -179,6 +179,14 @@ class GenericProgramParams:
         "box actions: padded sum (Eq 3.1) or dtw between the continuous traces, or net: the distance "
         "between their sums (the net move commanded, for bodies whose moves add up, such as a hand)",
         choices=("padded", "dtw", "net"),
+    )
+    rank: str = option(
+        "auto",
+        "once the policy is watched, a newer policy is published when it is better by: goals, then "
+        "shorter traces (goals), or where its traces end, closer together (ends: the planner; a "
+        "net-move map is as good as its traces' ends meet); auto: ends for the planner with "
+        "distance=net in a deterministic world, else goals",
+        choices=("auto", "goals", "ends"),
     )
     dtw_penalty: float = option(
         1.0, "distance=dtw: cost of each repeated step (keeps trace length in the distance)", min=0.0
@@ -438,6 +446,25 @@ def motor_job(
     }
 
 
+def end_disparity(ends: dict[int, tuple[np.ndarray, np.ndarray]]) -> float | None:
+    """How far a sweep's traces disagree about where they go: the Procrustes disparity (0 to 1) of
+    each trace's displacement (its end less its start) against its start, in the coordinates the
+    planner plans in; None without three starts apart, 1 when every trace goes the same way. The net
+    move of a trace is its displacement over the body's gain, so a net-move map matches the starts
+    (up to that gain) as far as the traces end where their starts would have them: at one goal, or
+    where a similarity of the starts puts them. Policies that reach every goal can still disagree
+    (the goal is a region): this ranks them with no truth."""
+    if len(ends) < 3:
+        return None
+    s = np.array([v[0] for v in ends.values()], dtype=np.float64)
+    e = np.array([v[1] for v in ends.values()], dtype=np.float64)
+    if np.allclose(s, s[0]):
+        return None
+    if np.allclose(s - e, (s - e)[0]):
+        return 1.0
+    return procrustes_error(s, s - e)
+
+
 def _sweep_score(reached: list[bool], traces: list[list[int]]) -> tuple[float, float]:
     """How good a sweep's policy is, without truth: the fraction of starts that reach the goal, and
     the mean length of the traces that do (shorter is better: every learner learns shortest paths)."""
@@ -596,6 +623,7 @@ class GenericProgram(Program):
         self._watching = False  # the detector sees trace scores only once the policy is good
         self._accepted: np.ndarray | None = None  # the accepted policy's weights (see the module docstring)
         self._best: tuple[float, float] | None = None
+        self._best_disparity: float | None = None  # planner, distance=net: the accepted sweep's end disparity
         self._checking = False  # this sweep runs the accepted policy, not the newest one
         self._sweep_w: np.ndarray | None = None  # the weights the sweep in progress follows
         self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
@@ -609,6 +637,8 @@ class GenericProgram(Program):
         self._unfed: list[float] = []  # trace scores of this sweep held back from the detector
         self._start_scores: list[float] = []  # scores of the start state in progress (one per sample)
         self._start_fair = True  # all of them came from the accepted policy's choices
+        self._trace_from: np.ndarray | None = None  # planner: where the trace in progress started
+        self._ends: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # planner: each start's (start, end) this sweep
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
         self._since_plan = 0  # planner: transitions since the last plan started
@@ -886,6 +916,7 @@ class GenericProgram(Program):
         self._diverged = False
         self._unfed = []
         self._start_scores, self._start_fair = [], True
+        self._ends, self._trace_from = {}, None
         # a random order: the detector then sees trace scores in no spatial order (a run of far
         # starts, long traces, would look like a drop)
         return self._sweep.begin([int(i) for i in self.rng.permutation(self.spec.n_starts)])
@@ -914,7 +945,15 @@ class GenericProgram(Program):
         frac, length = score
         good = frac >= self.params.watch_after
         best = self._best
-        if self.stochastic:  # sampled traces differ from sweep to sweep: within a tenth is as good
+        disparity = end_disparity(self._ends)
+        by_ends = self._by_ends() and disparity is not None and self._best_disparity is not None
+        if by_ends:
+            # net moves: a map is as good as its traces end where their starts would have them
+            # (`end_disparity`), and a policy that reaches the goal from more starts may end them worse
+            assert disparity is not None and self._best_disparity is not None
+            better = good and disparity < self._best_disparity - 1e-12
+            equal = good and abs(disparity - self._best_disparity) <= 1e-12
+        elif self.stochastic:  # sampled traces differ from sweep to sweep: within a tenth is as good
             better = best is None or frac > best[0] or (frac == best[0] and length <= best[1] * 1.1)
             equal = better
         else:
@@ -969,6 +1008,7 @@ class GenericProgram(Program):
             self._relearn_unconfirmed = 0
         if not self._checking and (better or not self._watching):
             self._accepted, self._best = np.array(self._sweep_w, copy=True), score
+            self._best_disparity = disparity if self._by_ends() else None
             self._accepted_traces = traces
             self._accepted_reached = [bool(r) for r in sw.reached]
             self._candidate_traces = None
@@ -977,6 +1017,14 @@ class GenericProgram(Program):
         self._embed(step, relearned, k)
         self._checking = False
         return None
+
+    def _by_ends(self) -> bool:
+        """Whether policies are ranked by where their traces end (`end_disparity`) once watched: the
+        planner's net-move maps in a deterministic world (`generic.rank=auto`), or when told."""
+        rank = self.params.rank
+        if rank == "auto":
+            return self.planner is not None and self.params.distance == "net" and not self.stochastic
+        return rank == "ends" and self.planner is not None and not self.stochastic
 
     def _find_rotations(self, step: int) -> Rotations | None:
         """Tabular learner, discrete actions, `frames=auto`: the rotations among the actions, found
@@ -1039,6 +1087,9 @@ class GenericProgram(Program):
             "rotation_order": float(rot.order if rot is not None else 0),
             "retried_traces": float(self._sweep.retries),
         }
+        disparity = end_disparity(self._ends)
+        if disparity is not None:
+            self._pending_embedding["end_disparity"] = disparity
         if relearned:
             self.relearn_at = None
 
@@ -1067,7 +1118,8 @@ class GenericProgram(Program):
                 np.asarray(result["coordinates"]),
                 tuple(float(e) for e in eig[: min(10, len(eig))]),
                 step,
-                {k: float(p.get(k, 0.0)) for k in keys},
+                {k: float(p.get(k, 0.0)) for k in keys}
+                | ({"end_disparity": p["end_disparity"]} if "end_disparity" in p else {}),
                 iteration=int(p["iteration"]),
                 drop_step=None if p["drop_step"] is None else int(p["drop_step"]),
             )
@@ -1317,14 +1369,20 @@ class GenericProgram(Program):
 
     def _sweep_act(self, obs: Observation) -> Decision:
         n_before = len(self._sweep.traces)
+        # the trace in progress's start (`started` is put back in start order once the sweep ends)
+        start = self._sweep.current
+        if self.planner is not None and obs.t == 0:
+            self._trace_from = self._vector(obs)
         dec = self._sweep.step(obs, self._choose, self._cycle, self._in_doubt)
         if len(self._sweep.traces) > n_before:
+            if self._trace_from is not None:
+                self._ends[start] = (self._trace_from, self._vector(obs))
             # a trace ended: its score goes to the detector now when it is the accepted policy's own
             # trace (a check sweep, or a newer policy that chose as the accepted one at every step),
             # else only if the newer policy is accepted when the sweep ends
             assert self._sweep.last is not None
             trace, ok = self._sweep.last
-            self._start_scores.append(self._trace_score(self._sweep.started[-1], trace, ok))
+            self._start_scores.append(self._trace_score(start, trace, ok))
             self._start_fair = self._start_fair and (self._checking or not self._diverged)
             if len(self._start_scores) >= self._sweep.repeats:
                 # one value per start state: its samples' mean (samples of one start run in a row,
@@ -1393,6 +1451,7 @@ class GenericProgram(Program):
         self._perf.clear()
         self._watching = False
         self._accepted, self._best, self._checking = None, None, False
+        self._best_disparity = None
         self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
         self._relearn_unconfirmed = 0
         self._accepted_basis, self._sweep_rbf = None, None
@@ -1433,6 +1492,9 @@ class GenericProgram(Program):
             "ids": sorted([key.hex(), i] for key, i in self._ids.items()),
             "accepted": None if self._accepted is None else self._accepted.copy(),
             "best": None if self._best is None else [self._best[0], min(self._best[1], 1e300)],
+            "best_disparity": self._best_disparity,
+            "ends": [[int(k), v[0].tolist(), v[1].tolist()] for k, v in self._ends.items()],
+            "trace_from": None if self._trace_from is None else self._trace_from.tolist(),
             "checking": self._checking,
             "sweep_w": None if self._sweep_w is None else self._sweep_w.copy(),
             "accepted_basis": self._accepted_basis,
@@ -1493,6 +1555,14 @@ class GenericProgram(Program):
         self._accepted = None if acc is None else np.asarray(acc, dtype=np.float64)
         best = state.get("best")
         self._best = None if best is None else (float(best[0]), float(best[1]))
+        bs = state.get("best_disparity")  # absent in older checkpoints
+        self._best_disparity = None if bs is None else float(bs)
+        self._ends = {
+            int(k): (np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+            for k, a, b in state.get("ends", [])
+        }
+        tf = state.get("trace_from")
+        self._trace_from = None if tf is None else np.asarray(tf, dtype=np.float64)
         self._checking = bool(state.get("checking", False))
         sw = state.get("sweep_w")
         self._sweep_w = None if sw is None else np.asarray(sw, dtype=np.float64)

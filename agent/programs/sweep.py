@@ -48,6 +48,11 @@ class StartStateSweep:
             self.order = [int(i) for i in order]
         return Decision(reset=True, start=self._start_of(0))
 
+    @property
+    def current(self) -> int:
+        """The start state of the trace in progress (the one `step` ends next; -1 once finished)."""
+        return self._start_of(self._start) if self._start < self.n_starts else -1
+
     def _start_of(self, i: int) -> int:
         k = i // self.repeats
         return self.order[k] if self.order is not None else k
