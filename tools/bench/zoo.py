@@ -243,10 +243,17 @@ def _run_task(task: tuple[ZooWorld, int, int]) -> dict[str, Any]:
 
 
 def main(
-    seeds: int = 3, quick: bool = False, only: list[str] | None = None, json_out: bool = False, workers: int = 1
+    seeds: int = 3,
+    quick: bool = False,
+    only: list[str] | None = None,
+    json_out: bool = False,
+    workers: int = 1,
+    seed_list: list[int] | None = None,
 ) -> int:
     """Run the zoo; print one line per run and a summary table (or JSON lines). With `workers` > 1
-    the runs go to that many processes (each run is seeded: the figures are the same)."""
+    the runs go to that many processes (each run is seeded: the figures are the same). `seed_list`:
+    exactly these seeds instead of 0 .. seeds-1 (a run of seed 2 alone gives what seed 2 gives in
+    `--seeds 3`)."""
     import importlib.util
     import multiprocessing as mp
 
@@ -257,7 +264,8 @@ def main(
         if z.needs and importlib.util.find_spec(z.needs) is None:
             print(f"zoo: {z.label}: skipped ({z.needs} is not installed: pip install -e '.[worlds]')", file=sys.stderr)
             continue
-        tasks += [(z, seed, z.quick_steps if quick else z.steps) for seed in range(seeds)]
+        chosen = seed_list if seed_list else range(seeds)
+        tasks += [(z, seed, z.quick_steps if quick else z.steps) for seed in chosen]
     pool = mp.get_context("spawn").Pool(workers) if workers > 1 and len(tasks) > 1 else None
     try:
         runs = pool.imap(_run_task, tasks) if pool is not None else map(_run_task, tasks)
@@ -308,12 +316,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "zoo", help="the generic program on Gymnasium, MiniGrid and panda-gym worlds", description=__doc__
     )
-    p.add_argument("--seeds", type=int, default=3, help="seeds per world (default 3)")
+    p.add_argument("--seeds", type=int, default=3, help="seeds per world: 0 .. N-1 (default 3)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        action="append",
+        metavar="S",
+        help="run seed S only (repeatable; instead of --seeds): each run is seeded, so it gives what it gives in --seeds",
+    )
     p.add_argument("--quick", action="store_true", help="shorter runs (a smoke test, not the figures)")
     p.add_argument("--world", action="append", metavar="NAME", help="only these entries (label substring or gym: name)")
     p.add_argument("--json", action="store_true", help="one JSON object per run, then per world")
     p.add_argument("--workers", type=int, default=1, help="processes the runs are spread over (default 1)")
-    p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json, a.workers))
+    p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json, a.workers, a.seed))
 
 
 __all__ = ["ZOO", "ZooWorld", "main", "post_convergence", "run_one", "sensor_peers", "summary"]
