@@ -257,9 +257,15 @@ def main(
     import importlib.util
     import multiprocessing as mp
 
+    labels = {z.label.lower() for z in ZOO}
+
+    def chosen_by(o: str, z: ZooWorld) -> bool:  # a whole label names that entry alone
+        o = o.lower()
+        return z.label.lower() == o if o in labels else o in z.label.lower() or o == z.world.lower()
+
     tasks = []
     for z in ZOO:
-        if only and not any(o.lower() in z.label.lower() or o == z.world for o in only):
+        if only and not any(chosen_by(o, z) for o in only):
             continue
         if z.needs and importlib.util.find_spec(z.needs) is None:
             print(f"zoo: {z.label}: skipped ({z.needs} is not installed: pip install -e '.[worlds]')", file=sys.stderr)
@@ -325,7 +331,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="run seed S only (repeatable; instead of --seeds): each run is seeded, so it gives what it gives in --seeds",
     )
     p.add_argument("--quick", action="store_true", help="shorter runs (a smoke test, not the figures)")
-    p.add_argument("--world", action="append", metavar="NAME", help="only these entries (label substring or gym: name)")
+    p.add_argument(
+        "--world",
+        action="append",
+        metavar="NAME",
+        help="only these entries (a whole label names that entry alone; else every label containing NAME, or the gym: name)",
+    )
     p.add_argument("--json", action="store_true", help="one JSON object per run, then per world")
     p.add_argument("--workers", type=int, default=1, help="processes the runs are spread over (default 1)")
     p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json, a.workers, a.seed))
