@@ -182,10 +182,10 @@ class GenericProgramParams:
     )
     rank: str = option(
         "auto",
-        "once the policy is watched, a newer policy is published when it is better by: goals, then "
-        "shorter traces (goals), or where its traces end, closer together (ends: the planner; a "
-        "net-move map is as good as its traces' ends meet); auto: ends for the planner with "
-        "distance=net in a deterministic world, else goals",
+        "once the policy is watched, a newer policy is published when it is better by: more goals, "
+        "then shorter traces (goals), or a lower end disparity (ends, the planner: its traces end "
+        "more nearly where a similarity of their starts puts them, which a net-move map needs); "
+        "auto: ends for the planner with distance=net in a deterministic world, else goals",
         choices=("auto", "goals", "ends"),
     )
     dtw_penalty: float = option(
@@ -1022,9 +1022,8 @@ class GenericProgram(Program):
         """Whether policies are ranked by where their traces end (`end_disparity`) once watched: the
         planner's net-move maps in a deterministic world (`generic.rank=auto`), or when told."""
         rank = self.params.rank
-        if rank == "auto":
-            return self.planner is not None and self.params.distance == "net" and not self.stochastic
-        return rank == "ends" and self.planner is not None and not self.stochastic
+        chosen = rank == "ends" or (rank == "auto" and self.params.distance == "net")
+        return chosen and self.planner is not None and not self.stochastic
 
     def _find_rotations(self, step: int) -> Rotations | None:
         """Tabular learner, discrete actions, `frames=auto`: the rotations among the actions, found

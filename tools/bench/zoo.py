@@ -42,7 +42,7 @@ class ZooWorld:
 
 
 ZOO: tuple[ZooWorld, ...] = (
-    ZooWorld("FrozenLake 8x8", "gym:FrozenLake-v1", {"map_name": "8x8", "is_slippery": "false"}, {}, 30_000, 10_000),
+    ZooWorld("FrozenLake 8x8", "gym:FrozenLake-v1", {"map_name": "8x8", "is_slippery": "false"}, {}, 50_000, 10_000),
     ZooWorld("FrozenLake 4x4 slippery", "gym:FrozenLake-v1", {}, {}, 60_000, 20_000),
     ZooWorld("FrozenLake 4x4 slippery, mean estimator", "gym:FrozenLake-v1", {}, {"estimator": "mean"}, 60_000, 20_000),
     ZooWorld(
@@ -56,7 +56,7 @@ ZOO: tuple[ZooWorld, ...] = (
     ZooWorld(
         "FrozenLake 4x4 slippery, plain estimator", "gym:FrozenLake-v1", {}, {"estimator": "plain"}, 60_000, 20_000
     ),
-    ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 30_000, 10_000),
+    ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 50_000, 10_000),
     ZooWorld("MiniGrid Empty 8x8", "gym:MiniGrid-Empty-8x8-v0", {}, {}, 60_000, 20_000, "minigrid"),
     ZooWorld("MountainCar", "gym:MountainCar-v0", {}, {}, 100_000, 30_000),
     ZooWorld("MountainCarContinuous", "gym:MountainCarContinuous-v0", {}, {}, 100_000, 30_000),
