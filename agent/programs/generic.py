@@ -191,12 +191,19 @@ class GenericProgramParams:
     dtw_penalty: float = option(
         1.0, "distance=dtw: cost of each repeated step (keeps trace length in the distance)", min=0.0
     )
-    samples: int = option(8, "traces per start state once the world is seen to be stochastic", min=2, max=100)
+    samples: int = option(
+        8,
+        "traces per start state once the world is seen to be stochastic (every estimator: the goal fraction "
+        "that ranks and watches policies is estimated from all of them)",
+        min=2,
+        max=100,
+    )
     estimator: str = option(
         "mode",
         "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4), mean_trace (the padded sum "
-        "between the starts' mean traces, a distance between trace distributions), or plain (one trace "
-        "per start, as in a deterministic world: the figure the estimators are compared with)",
+        "between the starts' mean traces, a distance between trace distributions), or plain (the first "
+        "sampled trace of each start, as in a deterministic world: the figure the estimators are "
+        "compared with)",
         choices=("mode", "mean", "mean_trace", "plain"),
     )
     stochastic_gamma: float = option(
@@ -402,6 +409,8 @@ def embed_job(
         rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
         traces = [[frame_trace(t, rot, n_actions) for t in s] for s in traces]
         symbols = n_actions * (1 + rot.order)  # the labels frame_trace gives
+    if estimator == "plain":  # one sampled trace per start, as if the world were deterministic
+        traces, reached = [s[:1] for s in traces], None if reached is None else [r[:1] for r in reached]
     if any(len(t) > 1 for t in traces) and estimator == "mean_trace" and actions is None:
         D = mean_trace_distances(traces, symbols, reached)
     elif any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
@@ -674,7 +683,7 @@ class GenericProgram(Program):
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
     def _new_sweep(self) -> StartStateSweep:
-        k = self.params.samples if self.stochastic and self.params.estimator != "plain" else 1
+        k = self.params.samples if self.stochastic else 1
         return StartStateSweep(self.spec.n_starts * k, self.max_trace, goal=lambda o: reached(self.goal, o), repeats=k)
 
     # observations -> states --------------------------------------------------------------------
@@ -953,9 +962,17 @@ class GenericProgram(Program):
             assert disparity is not None and self._best_disparity is not None
             better = good and disparity < self._best_disparity - 1e-12
             equal = good and abs(disparity - self._best_disparity) <= 1e-12
-        elif self.stochastic:  # sampled traces differ from sweep to sweep: within a tenth is as good
-            better = best is None or frac > best[0] or (frac == best[0] and length <= best[1] * 1.1)
-            equal = better
+        elif self.stochastic and best is not None and self._accepted_reached is not None:
+            # goal fractions are estimates from sampled traces: a newer policy is better only beyond
+            # the noise of both its sweep and the accepted one's (one-sided, 1.64 standard errors),
+            # or as good within it with traces a fifth shorter; as good within the noise is equal
+            n, m = len(sw.reached), len(self._accepted_reached)
+            p = (frac * n + best[0] * m) / (n + m)
+            noise = 1.64 * float(np.sqrt(max(p * (1 - p), 0.01) * (1 / n + 1 / m)))
+            better = frac - best[0] > noise or (abs(frac - best[0]) <= noise and length < 0.8 * best[1])
+            equal = not better and frac >= best[0] - noise
+        elif self.stochastic:
+            better = equal = True
         else:
             better = best is None or frac > best[0] or (frac == best[0] and length < best[1] - 1e-9)
             equal = best is not None and frac == best[0] and length <= best[1] + 1e-9
@@ -1003,6 +1020,12 @@ class GenericProgram(Program):
             return None
         if (self._watching or good) and absolute:
             self._perf.extend(self._unfed)
+        if self._checking and self.stochastic:
+            # a re-draw of the accepted policy's traces: its scores are the detector's, but it is no
+            # new map (the published one was drawn from the same policy; publishing each draw would
+            # only publish the noise of the sampling)
+            self._checking = False
+            return None
         relearned = good and self.relearn_at is not None
         if relearned:
             self._relearn_unconfirmed = 0
@@ -1080,7 +1103,7 @@ class GenericProgram(Program):
             "goal_reached_fraction": frac,
             "mean_trace_length": float(np.mean([len(t) for t in traces])),
             "rewarded": self._sweep.rewarded,
-            "samples_per_start": float(k),
+            "samples_per_start": float(1 if prm.estimator == "plain" else k),
             "stochastic": float(self.stochastic),
             "accepted_policy": float(self._checking),
             "rotation_order": float(rot.order if rot is not None else 0),
