@@ -395,13 +395,16 @@ def test_gain_replays_the_accepted_traces_and_measures_how_far_a_command_moves_t
     assert np.allclose(g["step_gain"]["mean"], 1.0, atol=0.05) and max(g["step_gain"]["sd"]) < 0.05, g
 
 
-def _swept_detector_run(seed: int, steps: int, reverse_at: int | None = None, **program: str):
-    """FrozenLake 4x4 where a move goes where meant 9 times in 10: a stochastic world whose best
-    policy reaches the goal from over 90 % of its starts, so the program converges and watches.
-    `reverse_at`: from that step on every move goes the opposite way (a lesion the test makes)."""
+def _swept_detector_run(
+    seed: int, steps: int, reverse_at: int | None = None, success_rate: str = "0.9", **program: str
+):
+    """FrozenLake 4x4 where a move goes where meant 9 times in 10 (`success_rate`): a stochastic
+    world whose best policy reaches the goal from over 90 % of its starts, so the program converges
+    and watches. `reverse_at`: from that step on every move goes the opposite way (a lesion the
+    test makes)."""
     from sensorimotor.agent.detectors import make_detector
 
-    with make_world("gym:FrozenLake-v1", None, seed, {"success_rate": "0.9"}) as w:
+    with make_world("gym:FrozenLake-v1", None, seed, {"success_rate": success_rate}) as w:
         p = make_program(w.spec(), seed, **program)
         now, step = [0], w.step
 
@@ -456,3 +459,18 @@ def test_the_plain_estimator_samples_as_the_others_do_and_embeds_the_first_trace
     e = run.embeddings[0]
     assert program.stochastic and program._sweep.repeats == 8  # the goal fraction is from 8 traces a start
     assert e.metrics["samples_per_start"] == 1.0 and e.procrustes_error > 0.3  # one random draw each
+
+
+def test_slippery_ice_settles_on_its_best_policy_holds_the_map_and_watches_it():
+    """On FrozenLake's slippery ice (a move goes where meant 1 time in 3) no policy reaches the goal
+    from 90 % of the starts: the accepted policy is watched once `settle` newer ones were none
+    better beyond the noise. The map then holds, and reversed moves are a detected drop."""
+    from sensorimotor.protocol.messages import EventKind
+
+    program, run = _swept_detector_run(2, 60_000, reverse_at=50_000, success_rate=str(1 / 3))
+    settled = [e.step for e in run.events(EventKind.POLICY_ITERATION) if e.reason == "settled"]
+    drops = [e.step for e in run.events(EventKind.DROP_DETECTED)]
+    assert settled and settled[0] < 20_000, settled
+    before = [e for e in run.embeddings if e.step < 50_000]
+    assert len(before) == 1 and before[0].procrustes_error < 0.6, [(e.step, e.procrustes_error) for e in before]
+    assert len(drops) == 1 and 50_000 < drops[0] < 51_000, drops

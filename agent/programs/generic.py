@@ -55,8 +55,11 @@ Phases alternate: *learn* until `samples_per_iteration` new samples (LSPI: then 
 refitted and LSPI iterates off the act path) or `embed_every` steps (Sarsa, which learns on every
 step); *embed*: the greedy policy from each start state (`StartStateSweep`), trace distances,
 classical MDS, Embedding vN. Once a sweep reaches the goal from `watch_after` of the starts the
-policy is *accepted*; after that a new policy is embedded only when its sweep is as good (as many
-goals, traces no longer), else the accepted policy is swept again - so embeddings hold once
+policy is *accepted* (in a stochastic world also once `settle` newer policies in a row were none
+better beyond the noise of the sampled goal fractions: the best there is where no policy reaches
+`watch_after`); after that a new policy is embedded only when its sweep is better (a stochastic
+world: beyond the noise; a sweep of the accepted policy there is another draw of its traces, never a
+new map), else the accepted policy is swept again - so embeddings hold once
 learned, and the drop detector sees only the accepted policy's trace scores, never the program's
 own experiments: in a deterministic world 0 for a start whose goal the accepted policy reached
 and no longer does (twice: the start is run once more first), else 1; in a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are dropped,
@@ -227,6 +230,13 @@ class GenericProgramParams:
         "a sweep that reaches the goal from this fraction of starts makes the policy accepted (watched)",
         min=0.0,
         max=1.0,
+    )
+    settle: int = option(
+        3,
+        "stochastic worlds: a policy still the accepted one after this many newer policies, none better "
+        "beyond the noise of the sampled goal fractions, has converged and is watched (where no policy "
+        "reaches `watch_after` of the starts: FrozenLake's slippery ice, the best from 3 in 4)",
+        min=1,
     )
     learn_lag: int = option(
         75,
@@ -630,6 +640,7 @@ class GenericProgram(Program):
         self._perf: list[float] = []
         self._said_no_starts = False
         self._watching = False  # the detector sees trace scores only once the policy is good
+        self._held = 0  # stochastic: newer policies since the accepted one, none better beyond noise
         self._accepted: np.ndarray | None = None  # the accepted policy's weights (see the module docstring)
         self._best: tuple[float, float] | None = None
         self._best_disparity: float | None = None  # planner, distance=net: the accepted sweep's end disparity
@@ -978,6 +989,23 @@ class GenericProgram(Program):
             equal = best is not None and frac == best[0] and length <= best[1] + 1e-9
         same = self._accepted_traces is not None and [list(t) for t in sw.traces] == self._accepted_traces
         self.phase = "explore"
+        if self.stochastic and not (self._watching or self._checking or better) and best is not None:
+            # not better beyond the noise: the accepted map stays the published one; when `settle`
+            # newer policies in a row were not, the accepted policy has converged (the best there is
+            # in a world where no policy reaches `watch_after` of the starts) and is watched
+            self._held += 1
+            if self._held >= self.params.settle:
+                self._watching = True
+                self.emit(
+                    EventOutput(
+                        EventKind.POLICY_ITERATION,
+                        f"the accepted policy (goal from {best[0]:.0%} of sampled traces) held through "
+                        f"{self._held} newer policies, none better beyond the noise: watched from here",
+                        step,
+                        reason="settled",
+                    )
+                )
+            return None
         if self._watching and not self._checking and self._accepted is not None and not (better or same):
             if equal:
                 # as good as the accepted policy but other traces (ties broken another way): the
@@ -1030,7 +1058,7 @@ class GenericProgram(Program):
         if relearned:
             self._relearn_unconfirmed = 0
         if not self._checking and (better or not self._watching):
-            self._accepted, self._best = np.array(self._sweep_w, copy=True), score
+            self._accepted, self._best, self._held = np.array(self._sweep_w, copy=True), score, 0
             self._best_disparity = disparity if self._by_ends() else None
             self._accepted_traces = traces
             self._accepted_reached = [bool(r) for r in sw.reached]
@@ -1471,7 +1499,7 @@ class GenericProgram(Program):
         self._prev, self._prev_x, self._prev_key = None, None, None
         self.phase = "explore"
         self._perf.clear()
-        self._watching = False
+        self._watching, self._held = False, 0
         self._accepted, self._best, self._checking = None, None, False
         self._best_disparity = None
         self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
@@ -1515,6 +1543,7 @@ class GenericProgram(Program):
             "accepted": None if self._accepted is None else self._accepted.copy(),
             "best": None if self._best is None else [self._best[0], min(self._best[1], 1e300)],
             "best_disparity": self._best_disparity,
+            "held": self._held,
             "ends": [[int(k), v[0].tolist(), v[1].tolist()] for k, v in self._ends.items()],
             "trace_from": None if self._trace_from is None else self._trace_from.tolist(),
             "checking": self._checking,
@@ -1579,6 +1608,7 @@ class GenericProgram(Program):
         self._best = None if best is None else (float(best[0]), float(best[1]))
         bs = state.get("best_disparity")  # absent in older checkpoints
         self._best_disparity = None if bs is None else float(bs)
+        self._held = int(state.get("held", 0))  # absent in older checkpoints
         self._ends = {
             int(k): (np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
             for k, a, b in state.get("ends", [])
