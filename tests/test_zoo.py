@@ -474,3 +474,21 @@ def test_slippery_ice_settles_on_its_best_policy_holds_the_map_and_watches_it():
     before = [e for e in run.embeddings if e.step < 50_000]
     assert len(before) == 1 and before[0].procrustes_error < 0.6, [(e.step, e.procrustes_error) for e in before]
     assert len(drops) == 1 and 50_000 < drops[0] < 51_000, drops
+
+
+def test_convergence_is_a_goal_from_90_percent_of_starts_or_a_policy_the_program_watched():
+    from types import SimpleNamespace
+
+    from sensorimotor.tools.bench.zoo import post_convergence
+
+    def v(step: int, err: float, goal: float, watched: float = 0.0):
+        return SimpleNamespace(
+            step=step, procrustes_error=err, metrics={"goal_reached_fraction": goal, "watched": watched}
+        )
+
+    unsettled = [v(1, 0.2, 0.7), v(2, 0.5, 0.75)]
+    assert post_convergence(unsettled, []) == (0, None)
+    settled = [v(1, 0.2, 0.7), v(2, 0.5, 0.75, watched=1.0), v(3, 0.25, 0.75, watched=1.0)]
+    assert post_convergence(settled, []) == (1, 2.5)
+    assert post_convergence(settled, [1]) == (0, None)  # after a detected drop: not counted
+    assert post_convergence([v(1, 0.2, 0.95), v(2, 0.29, 0.8)], []) == (0, pytest.approx(1.45))

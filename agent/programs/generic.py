@@ -1134,6 +1134,7 @@ class GenericProgram(Program):
             "samples_per_start": float(1 if prm.estimator == "plain" else k),
             "stochastic": float(self.stochastic),
             "accepted_policy": float(self._checking),
+            "watched": float(self._watching),
             "rotation_order": float(rot.order if rot is not None else 0),
             "retried_traces": float(self._sweep.retries),
         }
@@ -1158,6 +1159,7 @@ class GenericProgram(Program):
             "samples_per_start",
             "stochastic",
             "accepted_policy",
+            "watched",
             "rotation_order",
             "retried_traces",
         )

@@ -125,14 +125,17 @@ def sensor_peers(world: Any, dims: int) -> dict[str, float | None]:
 
 
 def post_convergence(embs: list[Any], drops: list[int]) -> tuple[int, float | None]:
-    """After convergence (the first version that reached the goal from >= 90 % of starts): how many
-    versions were more than 1.5x worse than the best before them, and the worst such ratio (version
-    error / best error before it), leaving out versions that follow a detected drop."""
+    """After convergence (the first version that reached the goal from >= 90 % of starts, or that
+    the program published while it watched its policy as converged: a stochastic world's best policy
+    may reach fewer): how many versions were more than 1.5x worse than the best before them, and the
+    worst such ratio (version error / best error before it), leaving out versions that follow a
+    detected drop."""
     regressions, worst = 0, None
     best = None
     converged = False
     for e in embs:
-        converged = converged or e.metrics.get("goal_reached_fraction", 0.0) >= 0.9
+        m = e.metrics
+        converged = converged or m.get("goal_reached_fraction", 0.0) >= 0.9 or m.get("watched", 0.0) == 1.0
         err = float(e.procrustes_error or 0.0)
         if converged and best is not None and not any(d < e.step for d in drops):
             ratio = err / max(best, 1e-9)
