@@ -311,7 +311,7 @@ def test_slippery_frozenlake_is_embedded_from_mean_traces_of_a_long_horizon_poli
     assert program.stochastic and program.lspi.gamma == 0.99 and abs(program.lspi.tie_tolerance - 0.005) < 1e-3
     e = run.embeddings[0]
     assert e.metrics["stochastic"] == 1.0 and e.metrics["samples_per_start"] == 64.0
-    assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: 0.71 (docs/zoo.md)
+    assert e.procrustes_error < 0.2, e.procrustes_error  # the plain estimator: 0.68 (docs/zoo.md)
 
 
 def test_camera_frames_with_box_moves_are_planned_over_motor_coordinates_and_embedded():
