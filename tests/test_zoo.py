@@ -464,16 +464,20 @@ def test_the_plain_estimator_samples_as_the_others_do_and_embeds_the_first_trace
 def test_slippery_ice_settles_on_its_best_policy_holds_the_map_and_watches_it():
     """On FrozenLake's slippery ice (a move goes where meant 1 time in 3) no policy reaches the goal
     from 90 % of the starts: the accepted policy is watched once `settle` newer ones were none
-    better beyond the noise. The map then holds, and reversed moves are a detected drop."""
+    better beyond the noise. The map then holds, reversed moves are a detected drop, and the policy
+    that settles after it is published again as the relearned one."""
     from sensorimotor.protocol.messages import EventKind
 
-    program, run = _swept_detector_run(2, 60_000, reverse_at=50_000, success_rate=str(1 / 3))
+    program, run = _swept_detector_run(2, 75_000, reverse_at=50_000, success_rate=str(1 / 3))
     settled = [e.step for e in run.events(EventKind.POLICY_ITERATION) if e.reason == "settled"]
     drops = [e.step for e in run.events(EventKind.DROP_DETECTED)]
     assert settled and settled[0] < 20_000, settled
     before = [e for e in run.embeddings if e.step < 50_000]
     assert len(before) == 1 and before[0].procrustes_error < 0.6, [(e.step, e.procrustes_error) for e in before]
     assert len(drops) == 1 and 50_000 < drops[0] < 51_000, drops
+    relearned = [e for e in run.embeddings if e.trigger == "relearned"]
+    assert [e.drop_step for e in relearned] == drops, [(e.step, e.trigger) for e in run.embeddings]
+    assert [e.step for e in run.events(EventKind.RELEARNED)] == [relearned[0].step]
 
 
 def test_convergence_is_a_goal_from_90_percent_of_starts_or_a_policy_the_program_watched():

@@ -1005,6 +1005,13 @@ class GenericProgram(Program):
                         reason="settled",
                     )
                 )
+                if self.relearn_at is not None and self._accepted_traces and self._accepted_reached:
+                    # after a drop, the settled policy is the relearned one: its map (published when
+                    # it was accepted) again, now saying so
+                    self._checking = True
+                    acc = (self._accepted_traces, self._accepted_reached)
+                    self._embed(step, True, len(acc[0]) // self.spec.n_starts, of=acc)
+                    self._checking = False
             return None
         if self._watching and not self._checking and self._accepted is not None and not (better or same):
             if equal:
@@ -1097,10 +1104,12 @@ class GenericProgram(Program):
             self._rotations = found
         return self._rotations
 
-    def _embed(self, step: int, relearned: bool, k: int) -> None:
-        """Start the distances + MDS job on the sweep's traces; `relearned`: the first good policy
-        after a drop (the trigger will say so, with the drop's step)."""
-        traces = [list(t) for t in self._sweep.traces]
+    def _embed(self, step: int, relearned: bool, k: int, of: tuple[list[list[int]], list[bool]] | None = None) -> None:
+        """Start the distances + MDS job on the sweep's traces (or `of`: traces, `k` per start, and
+        whether each reached the goal); `relearned`: the first good policy after a drop (the trigger
+        will say so, with the drop's step)."""
+        traces, flags = of if of is not None else (self._sweep.traces, self._sweep.reached)
+        traces = [list(t) for t in traces]
         rot = self._find_rotations(step)
         n = len(traces) // k
         per_start = [traces[i * k : (i + 1) * k] for i in range(n)]
@@ -1110,7 +1119,7 @@ class GenericProgram(Program):
             "embed",
             embed_job,
             traces=per_start,
-            reached=[list(self._sweep.reached[i * k : (i + 1) * k]) for i in range(n)],
+            reached=[list(flags[i * k : (i + 1) * k]) for i in range(n)],
             actions=None if self.discrete else self.actions.copy(),
             dims=self.dims,
             estimator=prm.estimator,
@@ -1119,7 +1128,7 @@ class GenericProgram(Program):
             rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
             n_actions=self.n_actions,
         )
-        frac, length = _sweep_score(self._sweep.reached, traces)
+        frac, length = _sweep_score(list(flags), traces)
         self._pending_embedding = {
             "step": step,
             "n": n,
@@ -1130,7 +1139,8 @@ class GenericProgram(Program):
             "samples": float(self.lspi.n_samples),
             "goal_reached_fraction": frac,
             "mean_trace_length": float(np.mean([len(t) for t in traces])),
-            "rewarded": self._sweep.rewarded,
+            "rewarded": sum(bool(r) for r in flags),
+            "traces": len(traces),
             "samples_per_start": float(1 if prm.estimator == "plain" else k),
             "stochastic": float(self.stochastic),
             "accepted_policy": float(self._checking),
@@ -1180,7 +1190,7 @@ class GenericProgram(Program):
             self.emit(
                 EventOutput(
                     EventKind.RELEARNED,
-                    f"the policy reaches the goal again from {int(p['rewarded'])} of {n * int(p.get('samples_per_start', 1))} traces",
+                    f"the policy reaches the goal again from {int(p['rewarded'])} of {int(p.get('traces', n))} traces",
                     step,
                     {"drop_step": float(p["drop_step"] or 0)},
                 )
