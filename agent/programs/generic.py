@@ -54,16 +54,21 @@ every start takes the world back to one trace per start.
 Phases alternate: *learn* until `samples_per_iteration` new samples (LSPI: then features are
 refitted and LSPI iterates off the act path) or `embed_every` steps (Sarsa, which learns on every
 step); *embed*: the greedy policy from each start state (`StartStateSweep`), trace distances,
-classical MDS, Embedding vN. Once a sweep reaches the goal from `watch_after` of the starts the
-policy is *accepted* (in a stochastic world also once `settle` newer policies in a row were none
-better beyond the noise of the sampled goal fractions: the best there is where no policy reaches
-`watch_after`); after that a new policy is embedded only when its sweep is better (a stochastic
-world: beyond the noise; a sweep of the accepted policy there is another draw of its traces, never a
-new map), else the accepted policy is swept again - so embeddings hold once
-learned, and the drop detector sees only the accepted policy's trace scores, never the program's
-own experiments: in a deterministic world 0 for a start whose goal the accepted policy reached
-and no longer does (twice: the start is run once more first), else 1; in a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are dropped,
-the policy relearned from fresh experience and the next embedding says `relearned`.
+classical MDS, Embedding vN. Until the policy is *watched* every sweep's policy is published
+and accepted in a deterministic world; in a stochastic one only a policy better beyond the noise of
+the sampled goal fractions (1.64 standard errors) is. A sweep that reaches the goal from
+`watch_after` of the starts makes the policy watched; so does, in a stochastic world, an accepted
+policy that `settle` newer policies in a row did not beat beyond the noise (the best there is where
+no policy reaches `watch_after`: the event says `settled`). Once watched, a new policy is embedded
+only when its sweep is better (stochastic: beyond the noise), else the accepted policy is swept
+again - a stochastic world's sweep of the accepted policy is another draw of its traces and is never
+a new map - so embeddings hold once learned, and the drop detector sees only the accepted policy's
+trace scores, never the program's own experiments: in a deterministic world 0 for a start whose
+goal the accepted policy reached and no longer does (twice: the start is run once more first), else
+1; in a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are
+dropped, the policy relearned from fresh experience and the first good embedding after it (in a
+stochastic world that settles below `watch_after`: the settled policy's map, published again) says
+`relearned`.
 """
 
 from __future__ import annotations
@@ -678,6 +683,10 @@ class GenericProgram(Program):
             # trace scores change their measure (absolute vs relative to the accepted traces): the
             # detector's reference must be learned afresh, or the change of scale reads as a drop
             self.rebase_performance()
+            self._held = 0
+            best = getattr(self, "_best", None)
+            if not value and (best is None or best[0] < self.params.watch_after):
+                self._watching = False  # watched only as settled: a deterministic world asks for more
         self._stochastic = bool(value)
 
     def describe(self) -> str:
@@ -693,9 +702,12 @@ class GenericProgram(Program):
         }[self.learner]
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
-    def _new_sweep(self) -> StartStateSweep:
-        k = self.params.samples if self.stochastic else 1
-        return StartStateSweep(self.spec.n_starts * k, self.max_trace, goal=lambda o: reached(self.goal, o), repeats=k)
+    def _new_sweep(self, n: int | None = None, repeats: int | None = None) -> StartStateSweep:
+        """A sweep of every start state, `samples` traces each in a stochastic world (or `n` traces,
+        `repeats` per start: the shape of a saved sweep, which the world may since have changed)."""
+        k = repeats if repeats is not None else self.params.samples if self.stochastic else 1
+        n = n if n is not None else self.spec.n_starts * k
+        return StartStateSweep(n, self.max_trace, goal=lambda o: reached(self.goal, o), repeats=k)
 
     # observations -> states --------------------------------------------------------------------
     def _vector(self, obs: Observation) -> np.ndarray:
@@ -949,7 +961,12 @@ class GenericProgram(Program):
             # every start's samples were the same trace: the policy controls whatever made the
             # transitions differ (or distinct states looked alike), so one trace per start will do
             # (ch. 9.4); the transitions are watched again from here
+            n_sampled = len(sw.traces)
             sw.traces, sw.reached = sw.traces[::k], sw.reached[::k]
+            if self._accepted_traces is not None and len(self._accepted_traces) == n_sampled:
+                self._accepted_traces = self._accepted_traces[::k]  # one per start, as the sweep's
+            if self._accepted_reached is not None and len(self._accepted_reached) == n_sampled:
+                self._accepted_reached = self._accepted_reached[::k]
             sw.repeats, k, sw.rewarded = 1, 1, sum(sw.reached)
             self.stochastic = False
             self._plan_for_chance()
@@ -1106,8 +1123,8 @@ class GenericProgram(Program):
 
     def _embed(self, step: int, relearned: bool, k: int, of: tuple[list[list[int]], list[bool]] | None = None) -> None:
         """Start the distances + MDS job on the sweep's traces (or `of`: traces, `k` per start, and
-        whether each reached the goal); `relearned`: the first good policy after a drop (the trigger
-        will say so, with the drop's step)."""
+        whether each reached the goal); `relearned`: the first good (or settled) policy after a drop
+        (the trigger will say so, with the drop's step)."""
         traces, flags = of if of is not None else (self._sweep.traces, self._sweep.reached)
         traces = [list(t) for t in traces]
         rot = self._find_rotations(step)
@@ -1146,9 +1163,9 @@ class GenericProgram(Program):
             "accepted_policy": float(self._checking),
             "watched": float(self._watching),
             "rotation_order": float(rot.order if rot is not None else 0),
-            "retried_traces": float(self._sweep.retries),
+            "retried_traces": float(self._sweep.retries if of is None else 0),
         }
-        disparity = end_disparity(self._ends)
+        disparity = end_disparity(self._ends) if of is None else None  # `of`: not this sweep's ends
         if disparity is not None:
             self._pending_embedding["end_disparity"] = disparity
         if relearned:
@@ -1603,8 +1620,10 @@ class GenericProgram(Program):
         self._prev_x = None if px is None else np.asarray(px, dtype=np.float64)
         pk = state.get("prev_key")
         self._prev_key = None if pk is None else bytes.fromhex(str(pk))
-        self._sweep = self._new_sweep()
-        self._sweep.restore(state["sweep"])
+        sws = state["sweep"]
+        n_traces = int(sws["n_starts"])
+        self._sweep = self._new_sweep(n_traces, int(sws.get("repeats", max(1, n_traces // max(1, self.spec.n_starts)))))
+        self._sweep.restore(sws)
         self._perf = [float(v) for v in state["perf"]]
         self._next_id, self._seen = int(state["next_id"]), int(state["seen_count"])
         self._fitted_at = int(state["fitted_at"])

@@ -105,6 +105,7 @@ class StartStateSweep:
         """Traces so far, the start state and trace in progress (n_starts, max_trace: configuration)."""
         return {
             "n_starts": self.n_starts,
+            "repeats": self.repeats,
             "max_trace": self.max_trace,
             "traces": [list(t) for t in self.traces],
             "rewarded": self.rewarded,
@@ -126,6 +127,7 @@ class StartStateSweep:
                 f"sweep state is for {state['n_starts']} start states and traces of "
                 f"{state['max_trace']}, this sweep has {self.n_starts} and {self.max_trace}"
             )
+        self.repeats = int(state.get("repeats", self.repeats))  # absent in older checkpoints
         self.traces = [[int(a) for a in t] for t in state["traces"]]
         self.rewarded, self.finished = int(state["rewarded"]), bool(state["finished"])
         self.reached = [bool(v) for v in state.get("reached", [])]
