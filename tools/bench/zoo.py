@@ -166,8 +166,9 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
         truth = w.truth()
     errors = [float(e.procrustes_error) for e in embs if e.procrustes_error is not None]
     drops = [e.step for e in run.events(EventKind.DROP_DETECTED)]
-    # after convergence (the first version that reached the goal from >= 90 % of starts), no version
-    # more than 1.5x worse than the best before it, unless a drop was detected before it
+    # after convergence (the first version that reached the goal from >= 90 % of starts, or that was
+    # published while the program watched its policy), no version more than 1.5x worse than the best
+    # before it, unless a drop was detected before it
     regressions, worst = post_convergence(embs, drops)
     trust = None
     if embs and truth is not None:
