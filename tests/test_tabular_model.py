@@ -127,3 +127,95 @@ def test_a_minigrid_room_wider_than_the_view_is_served_whole():
     with make_world("gym:MiniGrid-Empty-16x16-v0", None, 0, {"view": "agent"}) as w:
         seen = {w.reset(start=k).tensors["image"].tobytes() for k in range(w.spec().n_starts)}
         assert len(seen) < w.spec().n_starts  # aliased
+
+
+LEARNER_PACKAGE = '''
+import numpy as np
+
+
+def plan(q):
+    return {"q": q}
+
+
+class OptimisticQ:
+    """One-step Q-learning with optimistic initial values: a learner from outside this project."""
+
+    plan_job = staticmethod(plan)
+
+    def __init__(self, n_states, n_actions, seed=0):
+        self.n_actions = n_actions
+        self.rng = np.random.default_rng(seed)
+        self.q = np.ones((n_states, n_actions))
+        self.steps = 0
+
+    def act(self, s):
+        q = self.q[s]
+        return int(self.rng.choice(np.flatnonzero(q >= q.max() - 1e-12)))
+
+    def learn_one(self, s, a, s_next, outcome):
+        target = 1.0 if outcome == "goal" else 0.0 if outcome == "failure" else 0.9 * self.q[s_next].max()
+        self.q[s, a] += 0.5 * (target - self.q[s, a])
+        self.steps += 1
+        return False
+
+    def job_args(self):
+        return {"q": self.q.copy()}
+
+    def install(self, result):
+        pass
+
+    def complete(self):
+        return self.steps > 2000
+
+    def set_stochastic(self, stochastic):
+        pass
+
+    def reset(self):
+        self.q[:] = 1.0
+
+    def state(self):
+        return {"q": self.q.copy(), "steps": self.steps}
+
+    def restore(self, state):
+        self.q, self.steps = np.asarray(state["q"]), int(state["steps"])
+'''
+
+
+def test_a_learner_from_an_installed_package_is_chosen_by_name(tmp_path, monkeypatch):
+    """A table learner that a package declares in the `sensorimotor.learners` entry-point group is
+    chosen with `generic.learner=NAME` and learns the gridworld; an unknown name is refused with
+    the valid ones."""
+    import importlib
+    import sys
+    from dataclasses import replace
+
+    from sensorimotor.agent.programs.registry import check_program_params
+    from sensorimotor.protocol.errors import SpecMismatch
+    from sensorimotor.worlds.gridworld import GridWorld
+
+    pkg = tmp_path / "my_learners"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "q.py").write_text(LEARNER_PACKAGE)
+    dist = tmp_path / "my_learners-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: my-learners\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[sensorimotor.learners]\noptimistic-q = my_learners.q:OptimisticQ\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.invalidate_caches()
+    try:
+        assert check_program_params({"generic": {"learner": "optimistic-q"}}) == {
+            "generic": {"learner": "optimistic-q"}
+        }
+        world = GridWorld("g", seed=0, size=7)
+        spec = replace(world.spec(), program="generic")
+        program = make_program(spec, 0, learner="optimistic-q")
+        assert type(program.model).__name__ == "OptimisticQ" and "OptimisticQ" in program.describe()
+        run = run_inprocess(world, program, 8_000)
+        errors = [e for e in run.errors if e is not None]
+        assert errors and errors[-1] < 0.05, errors
+        with pytest.raises(SpecMismatch, match="optimistic-q"):  # the valid names include the outside one
+            make_program(spec, 0, learner="no-such-learner")
+    finally:
+        sys.modules.pop("my_learners.q", None)
+        sys.modules.pop("my_learners", None)

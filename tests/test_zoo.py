@@ -263,12 +263,12 @@ def test_bench_zoo_workers_give_the_same_figures_as_one_process(capsys, monkeypa
     for workers in (1, 2):
         assert zoo.main(seeds=2, quick=True, json_out=True, workers=workers) == 0
         lines = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
-        rows[workers] = [{k: v for k, v in r.items() if "seconds" not in k} for r in lines]
+        rows[workers] = [{k: v for k, v in r.items() if "second" not in k} for r in lines]
     assert len(rows[1]) == 3 and rows[1][0]["seed"] == 0 and rows[1][1]["seed"] == 1 and rows[1][2]["summary"]
     assert rows[1] == rows[2]
     assert zoo.main(quick=True, json_out=True, seed_list=[1]) == 0  # one seed alone: what it gives among others
     alone = [json.loads(x) for x in capsys.readouterr().out.splitlines()][0]
-    assert {k: v for k, v in alone.items() if "seconds" not in k} == rows[1][1]
+    assert {k: v for k, v in alone.items() if "second" not in k} == rows[1][1]
 
 
 @pytest.mark.skipif(importlib.util.find_spec("minigrid") is None, reason="minigrid is not installed")

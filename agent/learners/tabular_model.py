@@ -19,7 +19,7 @@ than `known` times as reaching the goal at once.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -41,14 +41,13 @@ def plan_tabular_job(
     known: int,
     tolerance: float = 1e-7,
     max_iterations: int = 5000,
-    **extra: Any,
 ) -> dict[str, Any]:
     """Value iteration on the counted model (a pure function, run off the act path).
 
     `rows`/`cols`/`counts`: how often (state * n_actions + action) led to a state that goes on;
     `tried`: how often each (state, action) was taken; `goals`: how often it reached the goal.
     Returns the exploit values `q` and the explore values `q_explore` ([n_states, n_actions]), the
-    sweeps value iteration took, and `extra` unchanged (what the caller wants back with the plan)."""
+    sweeps value iteration took."""
     S, A = int(n_states), int(n_actions)
     n = np.asarray(tried, dtype=np.float64).reshape(S * A)
     safe = np.maximum(n, 1.0)
@@ -78,7 +77,7 @@ def plan_tabular_job(
 
     q, it_exploit = solve(False)
     q_explore, it_explore = solve(True)
-    return {"q": q, "q_explore": q_explore, "iterations": max(it_exploit, it_explore), **extra}
+    return {"q": q, "q_explore": q_explore, "iterations": max(it_exploit, it_explore)}
 
 
 class TabularModel:
@@ -88,7 +87,10 @@ class TabularModel:
 
     `known`: tries after which an action's outcomes are trusted (1 in a deterministic world; the
     caller raises it to `known_stochastic` with `set_stochastic`). `epsilon`: the rate of random
-    actions while exploring, once nothing near is untried."""
+    actions while exploring, once nothing near is untried. Implements
+    `agent.learners.base.TableLearner`."""
+
+    plan_job: ClassVar[Any] = staticmethod(plan_tabular_job)
 
     def __init__(
         self,
@@ -155,6 +157,11 @@ class TabularModel:
             if best is None or best != s_next and n > self._next[(sa, best)]:
                 self._likely[sa] = int(s_next)
         return bool(self.tried[s, a] == self.known)
+
+    def complete(self) -> bool:
+        """Every action of every state met was tried `known` times."""
+        met = self.tried.sum(axis=1) > 0
+        return not bool((self.tried[met] < self.known).any())
 
     def untried(self, s: int) -> np.ndarray:
         """The actions of `s` tried fewer than `known` times."""

@@ -10,9 +10,14 @@ arriving; a truncation is neither.
 
 The learner follows the observation (`learner=auto`; the attach event says which):
 
-* ``tabular`` - one integer sensor with few values is a state id (the gridworld of ch. 5); integer
+* ``model`` - one integer sensor with few values is a state id (the gridworld of ch. 5); integer
   sensors with at most `symbol_values` values each (a symbolic grid such as MiniGrid's) are
-  tabulated by distinct observation. LSPI over the table, random exploration.
+  tabulated by distinct observation. Over the table: a model counted from experience (where each
+  action led, how often it reached the goal) and value iteration on it, exploring by optimism about
+  actions not yet tried `model_known` times (`agent.learners.tabular_model`); a stochastic world's
+  probabilities are its counts. ``tabular`` is LSPI over the same table with random exploration
+  (ch. 5's recipe); the name of a table learner from an installed package (entry-point group
+  ``sensorimotor.learners``, `agent.learners.registry`) is driven the same way as ``model``.
 * ``sarsa`` - a continuous observation of at most `sarsa_max_dims` values: tile-coded Sarsa(lambda)
   with optimistic initial values (the classic mountain-car recipe, ch. 8's CMAC; hashed tiles above
   `memory`), which explores toward sparse goals by itself.
@@ -47,7 +52,7 @@ back to where they started) and compares traces in the frame of their start
 A world whose transitions are seen to be stochastic (the same observation and action led to
 different observations) is embedded from `samples` traces per start state with the ch. 9.4
 estimators (`estimator`: the mode trace or the mean pairwise distance) or the padded sum between
-mean traces (`mean_trace`); the embedding says so. The tabular learner there plans with discount
+mean traces (`mean_trace`, the default for discrete actions: `auto`); the embedding says so. The tabular learner there plans with discount
 `stochastic_gamma` over up to `stochastic_samples` samples. A sweep whose samples are one trace for
 every start takes the world back to one trace per start.
 
@@ -81,14 +86,17 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from sensorimotor.agent.embedding import classical_mds, procrustes_error, trace_distances
+from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
 from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
+from sensorimotor.agent.learners.base import TableLearner
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
 from sensorimotor.agent.learners.motor_map import MotorMap, fit_motor_map
+from sensorimotor.agent.learners.registry import outside_learners, table_learner_class
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
-from sensorimotor.agent.learners.tabular_model import TabularModel, plan_tabular_job
+from sensorimotor.agent.learners.tabular_model import TabularModel
+from sensorimotor.agent.programs.acceptance import Score, Verdict, compare, compare_ends, end_disparity, sweep_score
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.goal import failed, reached
 from sensorimotor.agent.programs.sweep import StartStateSweep
@@ -96,7 +104,9 @@ from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 from sensorimotor.protocol.params import option, parse
 
+#: the learners the program drives itself; any table learner of `agent.learners.registry` too
 LEARNERS = ("auto", "model", "tabular", "lspi", "sarsa", "planner")
+OWN_LEARNERS = ("tabular", "lspi", "sarsa", "planner")
 
 
 @dataclass(frozen=True)
@@ -106,8 +116,8 @@ class GenericProgramParams:
     learner: str = option(
         "auto",
         "auto (by the observation: see the module docstring), model (a counted model of a table, planned on), "
-        "tabular (LSPI over a table), lspi, sarsa or planner",
-        choices=LEARNERS,
+        "tabular (LSPI over a table), lspi, sarsa or planner, or the name of a table learner an installed "
+        "package declares (entry-point group sensorimotor.learners)",
     )
     samples_per_iteration: int = option(500, "tabular/lspi: new random-action samples between policy iterations", min=1)
     lspi_iterations: int = option(8, "at most this many LSPI iterations after each exploration phase", min=1)
@@ -222,8 +232,8 @@ class GenericProgramParams:
     samples: int = option(
         0,
         "traces per start state once the world is seen to be stochastic (every estimator: the goal fraction "
-        "that ranks and watches policies is estimated from all of them); 0: 32 for the mean_trace estimator, "
-        "else 8",
+        "that ranks and watches policies is estimated from all of them); 0: for the mean_trace estimator "
+        "768 traces a sweep, 8 to 64 per start (a mean trace's noise falls with its samples), else 8",
         min=0,
         max=100,
     )
@@ -492,32 +502,6 @@ def motor_job(
     }
 
 
-def end_disparity(ends: dict[int, tuple[np.ndarray, np.ndarray]]) -> float | None:
-    """How far a sweep's traces disagree about where they go: the Procrustes disparity (0 to 1) of
-    each trace's displacement (its end less its start) against its start, in the coordinates the
-    planner plans in; None without three starts apart, 1 when every trace goes the same way. The net
-    move of a trace is its displacement over the body's gain, so a net-move map matches the starts
-    (up to that gain) as far as the traces end where their starts would have them: at one goal, or
-    where a similarity of the starts puts them. Policies that reach every goal can still disagree
-    (the goal is a region): this ranks them with no truth."""
-    if len(ends) < 3:
-        return None
-    s = np.array([v[0] for v in ends.values()], dtype=np.float64)
-    e = np.array([v[1] for v in ends.values()], dtype=np.float64)
-    if np.allclose(s, s[0]):
-        return None
-    if np.allclose(s - e, (s - e)[0]):
-        return 1.0
-    return procrustes_error(s, s - e)
-
-
-def _sweep_score(reached: list[bool], traces: list[list[int]]) -> tuple[float, float]:
-    """How good a sweep's policy is, without truth: the fraction of starts that reach the goal, and
-    the mean length of the traces that do (shorter is better: every learner learns shortest paths)."""
-    ok = [len(t) for t, r in zip(traces, reached, strict=True) if r]
-    return (len(ok) / max(1, len(traces)), float(np.mean(ok)) if ok else float("inf"))
-
-
 class GenericProgram(Program):
     """Learns any world that declares start states: see the module docstring."""
 
@@ -541,7 +525,8 @@ class GenericProgram(Program):
         self.estimator = (
             prm.estimator if prm.estimator != "auto" else "mean_trace" if spec.action_space.discrete else "mode"
         )
-        self.samples = prm.samples or (32 if self.estimator == "mean_trace" else 8)
+        mean_trace = self.estimator == "mean_trace"
+        self.samples = prm.samples or (int(np.clip(768 // max(1, spec.n_starts), 8, 64)) if mean_trace else 8)
         self._motor_actions = _action_table(spec, prm.action_levels, prm.motor_scale or prm.action_scale)
         self.n_actions = self.actions.shape[0]
         self.discrete = spec.action_space.discrete
@@ -570,8 +555,17 @@ class GenericProgram(Program):
                 if d <= prm.sarsa_max_dims
                 else "lspi"
             )
+        table_class = None if learner in OWN_LEARNERS else table_learner_class(learner)
+        if learner not in OWN_LEARNERS and table_class is None:
+            valid = ", ".join([*LEARNERS, *outside_learners()])
+            raise SpecMismatch(f"generic program: no learner {learner!r}; valid: {valid}")
+        if table_class is not None and not (ids or symbols):
+            raise SpecMismatch(
+                f"generic program: learner {learner!r} learns over a table of states; world {spec.world_id} "
+                "observes neither a state id nor integer symbols (learner=auto picks one that fits)"
+            )
         self.learner = learner
-        self.tabular = learner in ("tabular", "model")  # a table of states (LSPI over it, or a model of it)
+        self.tabular = learner == "tabular" or table_class is not None  # a table of states
         self.keyed = self.tabular and not ids  # a table of distinct observations, not given state ids
         self._ids: dict[bytes, int] = {}
         self.stochastic = False
@@ -597,7 +591,7 @@ class GenericProgram(Program):
         basis: Any
         self.sarsa: SarsaLambda | None = None
         self.planner: ModelPlanner | None = None
-        self.model: TabularModel | None = None
+        self.model: TableLearner | None = None
         if self.tabular:
             if ids:
                 self.low = int(s0.low)
@@ -605,7 +599,7 @@ class GenericProgram(Program):
             else:
                 self.low, self.n_states = 0, prm.table_size
             basis = TabularBasis(self.n_states, self.n_actions)
-            if learner == "model":
+            if table_class is TabularModel:
                 self.model = TabularModel(
                     self.n_states,
                     self.n_actions,
@@ -614,6 +608,8 @@ class GenericProgram(Program):
                     epsilon=prm.model_epsilon,
                     seed=int(self.rng.integers(2**31)),
                 )
+            elif table_class is not None:
+                self.model = table_class(self.n_states, self.n_actions, seed=int(self.rng.integers(2**31)))  # type: ignore[call-arg]
         elif learner == "sarsa":
             self.n_states = 0
             coder = TileCoder(np.zeros(d), np.ones(d), prm.tiles, prm.tilings, memory=prm.memory)
@@ -716,6 +712,7 @@ class GenericProgram(Program):
         self.retried_total = 0  # traces run once more before they counted (`_in_doubt`), every sweep
         self._swept_policy: np.ndarray | None = None  # model learner: the greedy policy swept last
         self._since_sweep = 0  # model learner: transitions since the last sweep (by plans)
+        self._plan_for_sweep = False  # the plan in flight is swept when it is swapped in
         self.use_background(prm.learn_lag)
 
     @property
@@ -748,7 +745,11 @@ class GenericProgram(Program):
             "planner": f"a learned local-linear model and interpolated value iteration, "
             f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes"
             + (", over motor coordinates of the frames" if self.motor else ""),
-        }[self.learner]
+        }.get(
+            self.learner,
+            f"{type(self.model).__module__}.{type(self.model).__name__} over "
+            + ("a table of distinct observations" if self.keyed else "a table of state ids"),
+        )
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
     def _new_sweep(self, n: int | None = None, repeats: int | None = None) -> StartStateSweep:
@@ -1033,32 +1034,19 @@ class GenericProgram(Program):
                     reason="deterministic",
                 )
             )
-        score = _sweep_score(sw.reached, sw.traces)
-        frac, length = score
-        good = frac >= self.params.watch_after
+        new = sweep_score(sw.reached, sw.traces)
+        score = (new.fraction, new.length)
+        good = new.fraction >= self.params.watch_after
         best = self._best
         disparity = end_disparity(self._ends)
-        by_ends = self._by_ends() and disparity is not None and self._best_disparity is not None
-        if by_ends:
-            # net moves: a map is as good as its traces end where their starts would have them
-            # (`end_disparity`), and a policy that reaches the goal from more starts may end them worse
-            assert disparity is not None and self._best_disparity is not None
-            better = good and disparity < self._best_disparity - 1e-12
-            equal = good and abs(disparity - self._best_disparity) <= 1e-12
-        elif self.stochastic and best is not None and self._accepted_reached is not None:
-            # goal fractions are estimates from sampled traces: a newer policy is better only beyond
-            # the noise of both its sweep and the accepted one's (one-sided, 1.64 standard errors),
-            # or as good within it with traces a fifth shorter; as good within the noise is equal
-            n, m = len(sw.reached), len(self._accepted_reached)
-            p = (frac * n + best[0] * m) / (n + m)
-            noise = 1.64 * float(np.sqrt(max(p * (1 - p), 0.01) * (1 / n + 1 / m)))
-            better = frac - best[0] > noise or (abs(frac - best[0]) <= noise and length < 0.8 * best[1])
-            equal = not better and frac >= best[0] - noise
-        elif self.stochastic:
-            better = equal = True
+        if self._by_ends() and disparity is not None and self._best_disparity is not None:
+            verdict = compare_ends(disparity, self._best_disparity, good)  # (agent.programs.acceptance)
+        elif self.stochastic and (best is None or self._accepted_reached is None):
+            verdict = Verdict(True, True)  # nothing sampled to compare with yet
         else:
-            better = best is None or frac > best[0] or (frac == best[0] and length < best[1] - 1e-9)
-            equal = best is not None and frac == best[0] and length <= best[1] + 1e-9
+            accepted = None if best is None else Score(best[0], best[1], len(self._accepted_reached or ()))
+            verdict = compare(new, accepted, self.stochastic)
+        better, equal = verdict.better, verdict.equal
         same = self._accepted_traces is not None and [list(t) for t in sw.traces] == self._accepted_traces
         self.phase = "explore"
         if self.stochastic and not (self._watching or self._checking or better) and best is not None:
@@ -1210,7 +1198,7 @@ class GenericProgram(Program):
             rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
             n_actions=self.n_actions,
         )
-        frac, length = _sweep_score(list(flags), traces)
+        frac = sweep_score(list(flags), traces).fraction
         self._pending_embedding = {
             "step": step,
             "n": n,
@@ -1218,7 +1206,7 @@ class GenericProgram(Program):
             "drop_step": self.relearn_at if relearned else None,
             "iteration": self.lspi.iterations,
             "lspi_iterations": float(self.lspi.iterations),
-            "samples": float(self.lspi.n_samples if self.model is None else self.model.n_transitions),
+            "samples": float(self.lspi.n_samples if self.model is None else getattr(self.model, "n_transitions", 0)),
             "goal_reached_fraction": frac,
             "mean_trace_length": float(np.mean([len(t) for t in traces])),
             "rewarded": sum(bool(r) for r in flags),
@@ -1382,7 +1370,7 @@ class GenericProgram(Program):
                 self._embedded(result)
             elif name == "model":
                 self.model.install(result)
-                sweep = (bool(result.get("sweep")) and self._model_sweep_due(obs.step)) or sweep
+                sweep = (self._plan_for_sweep and self._model_sweep_due(obs.step)) or sweep
         s = self._table_id(obs)
         if obs.t > 0 and self._prev is not None:
             ps, pa = self._prev
@@ -1400,8 +1388,8 @@ class GenericProgram(Program):
             if not self.background.pending("model"):
                 due = self.new_samples >= self.params.samples_per_iteration
                 if due or (self._fresh and self._since_plan >= self.params.model_every):
-                    self.background.submit("model", plan_tabular_job, **self.model.job_args(), sweep=due)
-                    self._fresh, self._since_plan = False, 0
+                    self.background.submit("model", type(self.model).plan_job, **self.model.job_args())
+                    self._fresh, self._since_plan, self._plan_for_sweep = False, 0, due
                     if due:
                         self.new_samples = 0
                         self._no_starts(obs.step)
@@ -1422,11 +1410,10 @@ class GenericProgram(Program):
         self._since_sweep += self.params.samples_per_iteration
         if self._watching:
             return True
-        m = self.model
-        met = m.tried.sum(axis=1) > 0
-        complete = not bool((m.tried[met] < m.known).any())
-        q = m.q
+        complete = self.model.complete()
+        q = np.asarray(self.model.q)
         top = q.max(axis=1, keepdims=True)
+        met = np.arange(q.shape[0]) < max(len(self._ids), 0 if self.keyed else q.shape[0])
         policy = np.where(met, (q >= top - self.lspi.tie_tolerance * np.abs(top) - 1e-12).argmax(axis=1), -1)
         changed = self._swept_policy is None or not np.array_equal(policy, self._swept_policy)
         if complete and changed or self._since_sweep >= 20 * self.params.samples_per_iteration:
@@ -1742,6 +1729,7 @@ class GenericProgram(Program):
             out["model"] = self.model.state()
             out.update(fresh=self._fresh, since_plan=self._since_plan, last_choice=self._last_choice)
             out.update(swept_policy=self._swept_policy, since_sweep=self._since_sweep)
+            out["plan_for_sweep"] = self._plan_for_sweep
         if self.planner is not None:
             out["planner"] = self.planner.state()
             out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy())
@@ -1828,6 +1816,7 @@ class GenericProgram(Program):
             sp_ = state.get("swept_policy")
             self._swept_policy = None if sp_ is None else np.asarray(sp_, dtype=np.int64)
             self._since_sweep = int(state["since_sweep"])
+            self._plan_for_sweep = bool(state["plan_for_sweep"])
         if self.planner is not None:
             self.planner.restore(state["planner"])
             self._start_lo = np.asarray(state["start_lo"], dtype=np.float64)
