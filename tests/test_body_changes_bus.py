@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import shutil
 import sys
-import textwrap
 
 import pytest
 
@@ -102,64 +101,14 @@ def test_sme_perturb_applies_every_generic_kind_to_the_tutorial_worlds(procs, en
 
 
 # the hook, live ---------------------------------------------------------------------------------
-MIRROR_ROOM = '''
-"""A 5 x 5 room (the tutorial's, smaller) whose own body change, offered through the hook, reverses
-every move: ``sme perturb mirror --world MirrorRoom-v0``."""
-
-import gymnasium as gym
-import numpy as np
-from gymnasium import spaces
-
-MOVES = ((-1, 0), (1, 0), (0, -1), (0, 1))
-
-
-class MirrorRoom(gym.Env):
-    metadata = {"render_modes": []}
-    sme_perturbations = {"mirror": "every move reversed (again: as it was)"}
-
-    def __init__(self, size=5):
-        self.nrow = self.ncol = size
-        self.goal = (size // 2) * size + size // 2
-        self.observation_space = spaces.Discrete(size * size)
-        self.action_space = spaces.Discrete(4)
-        self.sign, self.s = 1, 0
-        self.initial_state_distrib = np.full(size * size, 1.0 / (size * size - 1))
-        self.initial_state_distrib[self.goal] = 0.0
-        self.P = {s: {a: [(1.0, self._next(s, a), 0.0, False)] for a in range(4)} for s in range(size * size)}
-
-    def _next(self, s, a):
-        r, c = divmod(s, self.ncol)
-        dr, dc = MOVES[a]
-        r = min(max(r + self.sign * dr, 0), self.nrow - 1)
-        c = min(max(c + self.sign * dc, 0), self.ncol - 1)
-        return r * self.ncol + c
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.s = int(self.np_random.choice(self.nrow * self.ncol, p=self.initial_state_distrib))
-        return self.s, {}
-
-    def step(self, action):
-        self.s = self._next(self.s, int(action))
-        at_goal = self.s == self.goal
-        return self.s, float(at_goal), at_goal, False, {}
-
-    def sme_perturb(self, kind, params):
-        self.sign = -self.sign
-        return "moves reversed" if self.sign < 0 else "moves as they were"
-
-
-gym.register(id="MirrorRoom-v0", entry_point=MirrorRoom, max_episode_steps=30)
-'''
-
-
 def test_an_environments_own_kind_is_applied_by_sme_perturb_noticed_and_relearned(
     procs, endpoint, capsys, tmp_path, monkeypatch
 ):
-    """No file of this project edited: the environment and its hook live in the user's package."""
+    """docs/tutorials/mirror_room.py, as the body-changes page gives it: no file of this project
+    edited, the environment and its hook live in the user's package."""
     (tmp_path / "my_envs").mkdir()
     (tmp_path / "my_envs" / "__init__.py").write_text("")
-    (tmp_path / "my_envs" / "mirror_room.py").write_text(textwrap.dedent(MIRROR_ROOM))
+    shutil.copy(ROOT / "docs" / "tutorials" / "mirror_room.py", tmp_path / "my_envs" / "mirror_room.py")
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
     procs.start("agent", "--listen", endpoint, "-q", "--program-param", "generic.samples_per_iteration=150")
     procs.start("world", "gym:my_envs.mirror_room:MirrorRoom-v0", "--connect", endpoint, "-q")
@@ -179,10 +128,15 @@ def test_an_environments_own_kind_is_applied_by_sme_perturb_noticed_and_relearne
 
         assert wait_for(learned, 150, every=0.5), seen[-5:]
         code, out, err = _perturb(capsys, endpoint, "--list", "--world", wid)
-        assert code == 0 and "mirror (its own): every move reversed" in out, out
+        assert code == 0 and "mirror (its own): Reverse the moves" in out and "rows|cols|both" in out, out
+        code, out, err = _perturb(capsys, endpoint, "mirror", "--world", wid, "--param", "axis=up")
+        assert code == 1 and "axis='up'" in err and "rows|cols|both" in err, err  # checked by its declaration
         mark = len(events)  # what the agent says from here on answers the change
         code, out, err = _perturb(capsys, endpoint, "mirror", "--world", wid)
-        assert code == 0 and f"world {wid} applied mirror: moves reversed" in out, (out, err)
+        assert code == 0 and f"world {wid} applied mirror: moves along rows reversed, along columns reversed" in out, (
+            out,
+            err,
+        )
 
         def kinds() -> set[str]:
             return {e.kind for e in list(events)[mark:]}
