@@ -163,6 +163,25 @@ def test_gain_scales_a_box_dimension_about_its_middle_within_its_range():
     assert applied(w, [0.8, 1.5]) == pytest.approx([0.4, 2.0])  # 1 + 3 * 0.5, clipped to 2
 
 
+def test_gain_repeats_a_discrete_action_and_a_fractional_gain_acts_that_often():
+    w = body(DISCRETE)
+    assert change(w, "gain", index=1, gain=2) == "action(s) [1] act 2 times per step"
+    applied(w, 1)
+    assert w.world.steps == 2
+    applied(w, 0)
+    assert w.world.steps == 3  # the other actions as they were
+    w = body(DISCRETE)
+    change(w, "gain", gain=0.5, seed=3)
+    for _ in range(400):
+        w.step(np.array([2.0]))
+    assert 170 <= w.world.steps <= 230  # every other step on average
+    fl = BodyChanges(GymWorld("FrozenLake-v1", "fl", env_kwargs={"is_slippery": False}))
+    change(fl, "gain", gain=2)
+    fl.reset(start=0)
+    assert int(fl.step(np.array([2.0])).tensors["observation"][0]) == 2  # "right" went two cells
+    fl.close()
+
+
 # lesion ----------------------------------------------------------------------------------------------
 def test_a_lesioned_discrete_action_leaves_the_body_where_it_was():
     w = body(DISCRETE)
@@ -241,7 +260,8 @@ def test_a_worlds_own_kind_takes_precedence_and_restore_also_heals_it():
     assert w.world.own_calls == ["reverse", "heal"]
     kinds = advertised(w.spec())
     assert kinds["reverse"]["from"] == "world" and kinds["heal"]["from"] == "world"
-    assert [k for k, v in kinds.items() if v["from"] == "generic"] == ["permute", "lesion", "noise", "delay", "restore"]
+    generic = [k for k, v in kinds.items() if v["from"] == "generic"]
+    assert generic == ["permute", "gain", "lesion", "noise", "delay", "restore"]
 
 
 def test_the_spec_advertises_the_kinds_with_their_parameters():
@@ -249,7 +269,7 @@ def test_the_spec_advertises_the_kinds_with_their_parameters():
     assert list(kinds) == ["reverse", "permute", "gain", "lesion", "noise", "delay", "restore"]
     gain = {p[0]: p for p in kinds["gain"]["params"]}
     assert gain["gain"][1:3] == ["float", "2.0"] and "-10.0..10.0" in gain["gain"][3]
-    assert "gain" not in advertised(body(DISCRETE).spec())  # gain scales a box dimension
+    assert list(advertised(body(DISCRETE).spec())) == list(kinds)  # every kind, for discrete actions too
     assert json.loads(body(BOX).spec().params["perturbations"]) == kinds
 
 
@@ -259,9 +279,9 @@ REFUSED = [
         DISCRETE,
         "melt",
         {},
-        ["probe has no perturbation 'melt'", "valid: reverse, permute, lesion, noise, delay, restore"],
+        ["probe has no perturbation 'melt'", "valid: reverse, permute, gain, lesion, noise, delay, restore"],
     ),
-    (DISCRETE, "gain", {}, ["no perturbation 'gain'", "scales a box dimension; this world's actions are discrete"]),
+    (DISCRETE, "gain", {"gain": "-1"}, ["gain=-1: a discrete action is repeated 0..10 times", "valid: 0.0..10.0"]),
     (DISCRETE, "reverse", {"index": 4}, ["index=4 is out of range", "4 discrete actions (0..3)", "valid: -1..3"]),
     (DISCRETE, "reverse", {"pairs": "0-1"}, ["pairs='0-1'", "'a:b,c:d'"]),
     (DISCRETE, "reverse", {"pairs": "0:1,1:2"}, ["none used twice"]),

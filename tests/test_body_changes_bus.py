@@ -23,16 +23,16 @@ from tests.test_tutorials import _serve, _stop
 pytestmark = pytest.mark.integration
 
 # every generic kind, with parameters where the default would not show (one call each)
-DISCRETE_CALLS = [
+CALLS = [
     ("reverse", []),
     ("permute", ["--param", "order=0:1"]),
     ("lesion", ["--param", "index=0"]),
     ("lesion", ["--param", "what=sensor", "--param", "stop=0.25"]),
+    ("gain", ["--param", "index=0", "--param", "gain=0.5"]),
     ("noise", ["--param", "sd=0.01"]),
     ("delay", ["--param", "steps=2"]),
     ("restore", []),
 ]
-BOX_CALLS = [*DISCRETE_CALLS[:5], ("gain", ["--param", "index=0", "--param", "gain=0.5"]), *DISCRETE_CALLS[5:]]
 
 
 def _perturb(capsys, endpoint: str, *args: str) -> tuple[int, str, str]:
@@ -41,12 +41,11 @@ def _perturb(capsys, endpoint: str, *args: str) -> tuple[int, str, str]:
     return code, out.out, out.err
 
 
-def _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint: str, wid: str, box: bool) -> None:
+def _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint: str, wid: str) -> None:
     assert wait_for(lambda: (ln := world_link(agent_status(endpoint), wid)) is not None and ln.steps > 5, 120)
     code, out, err = _perturb(capsys, endpoint, "--list", "--world", wid)
-    assert code == 0 and "reverse (generic)" in out and "delay (generic)" in out, (out, err)
-    assert ("gain (generic)" in out) == box, out
-    for kind, params in BOX_CALLS if box else DISCRETE_CALLS:
+    assert code == 0 and all(f"{k} (generic)" in out for k, _ in CALLS), (out, err)
+    for kind, params in CALLS:
         code, out, err = _perturb(capsys, endpoint, kind, "--world", wid, *params)
         assert code == 0 and f"world {wid} applied {kind}: " in out, (kind, out, err)
     code, out, err = _perturb(capsys, endpoint, "melt", "--world", wid)
@@ -55,27 +54,24 @@ def _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint: str, wid: str
     assert code == 1 and "index=99 is out of range" in err and "valid: -1.." in err, err  # the world's words
     code, out, err = _perturb(capsys, endpoint, "noise", "--world", wid, "--param", "sd=-1")
     assert code == 1 and "not sent" in err and "0.0..1000000.0" in err, err  # checked before sending
-    if not box:
-        code, out, err = _perturb(capsys, endpoint, "gain", "--world", wid)
-        assert code == 1 and "no perturbation 'gain'" in err and "valid: reverse, permute, lesion" in err, err
+    code, out, err = _perturb(capsys, endpoint, "gain", "--world", wid, "--param", "gain=-20")
+    assert code == 1 and "gain=-20" in err and "-10.0..10.0" in err, err
 
 
 GYM_WORLDS = [
-    ("gym:FrozenLake-v1", ["--param", "is_slippery=false"], "FrozenLake-v1", False, None),
-    ("gym:MiniGrid-Empty-5x5-v0", [], "MiniGrid-Empty-5x5-v0", False, "minigrid"),
-    ("gym:panda_gym:PandaReach-v3", ["--param", "start_grid=2"], "PandaReach-v3", True, "panda_gym"),
+    ("gym:FrozenLake-v1", ["--param", "is_slippery=false"], "FrozenLake-v1", None),
+    ("gym:MiniGrid-Empty-5x5-v0", [], "MiniGrid-Empty-5x5-v0", "minigrid"),
+    ("gym:panda_gym:PandaReach-v3", ["--param", "start_grid=2"], "PandaReach-v3", "panda_gym"),  # box actions
 ]
 
 
-@pytest.mark.parametrize(("world", "params", "wid", "box", "needs"), GYM_WORLDS, ids=[w[2] for w in GYM_WORLDS])
-def test_sme_perturb_applies_every_generic_kind_to_gymnasium_worlds(
-    procs, endpoint, capsys, world, params, wid, box, needs
-):
+@pytest.mark.parametrize(("world", "params", "wid", "needs"), GYM_WORLDS, ids=[w[2] for w in GYM_WORLDS])
+def test_sme_perturb_applies_every_generic_kind_to_gymnasium_worlds(procs, endpoint, capsys, world, params, wid, needs):
     if needs:
         pytest.importorskip(needs)
     procs.start("agent", "--listen", endpoint, "-q")
     procs.start("world", world, *params, "--connect", endpoint, "-q")
-    _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint, wid, box)
+    _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint, wid)
 
 
 @pytest.mark.parametrize("route", ["world_subclass", "gymnasium"])
@@ -94,7 +90,7 @@ def test_sme_perturb_applies_every_generic_kind_to_the_tutorial_worlds(procs, en
         cmd, wid = [sys.executable, "gym_room.py", "--connect", endpoint, "-q"], "Room-v0"
     world = _serve(cmd, tmp_path)
     try:
-        _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint, wid, box=False)
+        _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint, wid)
     finally:
         code, text = _stop(world)
     assert code == 0, text[-2000:]

@@ -238,7 +238,7 @@ def test_sme_perturb_answers_with_the_worlds_words(procs, endpoint):
     assert wait_for(lambda: link(status(endpoint), "g8") is not None, 30)
     out = _sme("perturb", "heal", "--world", "g8", "--connect", endpoint)
     assert out.returncode == 1 and "gridworld has no perturbation 'heal'" in out.stderr, out.stderr
-    assert "valid: reverse, permute, lesion, noise, delay, restore" in out.stderr, out.stderr
+    assert "valid: reverse, permute, gain, lesion, noise, delay, restore" in out.stderr, out.stderr
     assert "sent" not in out.stdout
     out = _sme("perturb", "reverse", "--world", "g8", "--connect", endpoint)  # generic: applied
     assert out.returncode == 0 and "world g8 applied reverse: swapped actions" in out.stdout, (out.stdout, out.stderr)

@@ -24,7 +24,7 @@ from sensorimotor.tools.common import parse_params
 
 GENERIC_HELP = (
     "every world served by sme (any World, any Gymnasium environment) also takes the generic changes "
-    "reverse, permute, gain (box actions), lesion, noise, delay and restore, unless it has its own of that name "
+    "reverse, permute, gain, lesion, noise, delay and restore, unless it has its own of that name "
     "(`sme perturb --list --world ID`)"
 )
 

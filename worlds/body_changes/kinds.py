@@ -1,7 +1,7 @@
 """The generic body changes' parameter sets: one typed, documented dataclass per kind.
 
 `GENERIC` maps each kind to its declaration; `kinds_for` says which of them a world's action space
-can take (``gain`` scales a box dimension, so a world of discrete actions does not offer it).
+can take (every one, for a box of actions and for discrete actions alike).
 An ``index`` names a box dimension or a discrete action (``-1``: every one); the world checks it
 against its own action space and refuses one out of range with the valid values.
 """
@@ -41,11 +41,13 @@ class PermuteParams:
 
 @dataclass(frozen=True)
 class GainParams:
-    """A box dimension scaled about the middle of its range (clipped to the range): a weaker or
-    stronger motor."""
+    """A weaker or stronger motor: a box dimension scaled about the middle of its range (clipped to
+    the range); a discrete action applied `gain` times per step (a fractional part: once more with
+    that probability, so 0.5 acts every other step on average; 0: not at all)."""
 
-    index: int = option(EVERY, "the dimension; -1: every one", min=-1)
-    gain: float = option(2.0, "the factor (negative also reverses)", min=-10.0, max=10.0)
+    index: int = option(EVERY, "box: the dimension; discrete: the action; -1: every one", min=-1)
+    gain: float = option(2.0, "the factor (box: negative also reverses; discrete: 0..10)", min=-10.0, max=10.0)
+    seed: int = option(0, "discrete, fractional gain: seeds which steps act once more", min=0)
 
 
 @dataclass(frozen=True)
@@ -99,9 +101,8 @@ GENERIC: dict[str, type] = {
     "restore": RestoreParams,
 }
 
-BOX_ONLY = frozenset({"gain"})
-
 
 def kinds_for(space: ActionSpace) -> dict[str, type]:
-    """The generic kinds a world with action space `space` can take."""
-    return {k: v for k, v in GENERIC.items() if not (space.discrete and k in BOX_ONLY)}
+    """The generic kinds a world with action space `space` can take: every one (each says what it
+    does to a box of actions and to discrete ones)."""
+    return dict(GENERIC)

@@ -20,7 +20,7 @@ from sensorimotor.protocol.messages import ActionSpace, Control, Truth, WorldSpe
 from sensorimotor.worlds.base import PerturbationError, StepResult, World, check_perturbation
 from sensorimotor.worlds.body_changes import motor, sensors
 from sensorimotor.worlds.body_changes.advertise import KEY, advertisement
-from sensorimotor.worlds.body_changes.kinds import BOX_ONLY, GENERIC, LesionParams, kinds_for
+from sensorimotor.worlds.body_changes.kinds import GENERIC, LesionParams, kinds_for
 
 
 class BodyChanges(World):
@@ -80,18 +80,29 @@ class BodyChanges(World):
     def step(self, action: np.ndarray) -> StepResult:
         given = np.asarray(action, dtype=np.float64).reshape(-1)
         a: np.ndarray | None = given
+        times = 1
         if self.actions and self._fits(given):
             for ch in self.actions:
                 if a is None:
                     break
                 a = ch.apply(a)
+                if a is not None and ch.rng is not None:
+                    times *= ch.repeats(a)
         self._t += 1
-        if a is None:  # the body did nothing: the world is where it was
+        if a is None or times == 0:  # the body did nothing: the world is where it was
             prev = self._raw if self._raw is not None else self.world.reset()
             over = self._t >= self.max_episode_steps
             r = StepResult(prev.tensors, 0.0, over, {"body": "did not act"}, truncated=over)
         else:
             r = self.world.step(a)
+            reward = r.reward
+            for _ in range(times - 1):  # a stronger motor: the same action again, within the step
+                if r.done:
+                    break
+                r = self.world.step(a)
+                reward += r.reward
+            if times > 1:
+                r = dataclasses.replace(r, reward=reward)
         self._raw = r
         return self._sense(r)
 
@@ -115,13 +126,7 @@ class BodyChanges(World):
         if kind in self.own:
             return self.world.perturb(control)
         if kind not in self.generic:
-            hint = ""
-            if kind in BOX_ONLY and kind in GENERIC:
-                hint = f" ({kind} scales a box dimension; this world's actions are discrete)"
-            try:
-                check_perturbation(self.kind, self.perturbations(), control)
-            except PerturbationError as e:
-                raise PerturbationError(f"{e}{hint}") from None
+            check_perturbation(self.kind, self.perturbations(), control)  # raises, naming the valid kinds
         p = check_perturbation(self.kind, self.generic, control)
         try:
             if kind == "noise":

@@ -79,12 +79,22 @@ class ActionChange:
     dims: np.ndarray | None = None  # box: out[dims[i]] = rescaled in[i] (a permutation)
     held: np.ndarray | None = None  # box: dimensions held at the middle of their range
     delay: int = 0
+    times: float = 1.0  # discrete: how many times the actions in `acting` act per step (gain)
+    acting: frozenset[int] = frozenset()
+    rng: np.random.Generator | None = None
     low: np.ndarray = field(default_factory=lambda: np.zeros(0))
     high: np.ndarray = field(default_factory=lambda: np.zeros(0))
     _queue: deque = field(default_factory=deque)
 
     def reset(self) -> None:
         self._queue.clear()
+
+    def repeats(self, a: np.ndarray) -> int:
+        """How many times discrete action `a` (the world's) acts this step (1 but for `gain`)."""
+        if self.rng is None or int(a[0]) not in self.acting:
+            return 1
+        whole = int(self.times)
+        return whole + int(self.rng.random() < self.times - whole)
 
     def apply(self, a: np.ndarray) -> np.ndarray | None:
         if self.delay:
@@ -204,9 +214,20 @@ def permute(p: PermuteParams, space: ActionSpace) -> ActionChange:
 
 
 def gain(p: GainParams, space: ActionSpace) -> ActionChange:
-    """A box dimension scaled about the middle of its range."""
+    """A box dimension scaled about the middle of its range; a discrete action repeated."""
     if space.discrete:
-        raise PerturbationError(f"gain scales a box dimension; the world has {_what(space)}")
+        if p.gain < 0:
+            raise PerturbationError(
+                f"gain: gain={p.gain:g}: a discrete action is repeated 0..10 times; valid: 0.0..10.0"
+            )
+        which = _indices(p.index, space, "gain")
+        return ActionChange(
+            "gain",
+            f"action(s) {which} act {p.gain:g} times per step",
+            times=p.gain,
+            acting=frozenset(which),
+            rng=np.random.default_rng(p.seed),
+        )
     dims = _indices(p.index, space, "gain")
     scale = np.ones(len(space.low))
     scale[dims] = p.gain
