@@ -55,7 +55,7 @@ def _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint: str, wid: str
     code, out, err = _perturb(capsys, endpoint, "noise", "--world", wid, "--param", "sd=-1")
     assert code == 1 and "not sent" in err and "0.0..1000000.0" in err, err  # checked before sending
     code, out, err = _perturb(capsys, endpoint, "gain", "--world", wid, "--param", "gain=-20")
-    assert code == 1 and "gain=-20" in err and "-10.0..10.0" in err, err
+    assert code == 1 and "gain='-20' is below the minimum" in err and "-10.0..10.0" in err, err
 
 
 GYM_WORLDS = [

@@ -78,10 +78,14 @@ class BodyChanges(World):
         return self._sense(r)
 
     def step(self, action: np.ndarray) -> StepResult:
+        if not self.actions:  # the hot path: no change on the action channel
+            self._t += 1
+            self._raw = self.world.step(action)
+            return self._sense(self._raw) if self.senses else self._raw
         given = np.asarray(action, dtype=np.float64).reshape(-1)
         a: np.ndarray | None = given
         times = 1
-        if self.actions and self._fits(given):
+        if self._fits(given):
             for ch in self.actions:
                 if a is None:
                     break
