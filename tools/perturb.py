@@ -22,21 +22,24 @@ from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import Control, WorldEvent, WorldEventKind, WorldSpec
 from sensorimotor.tools.common import parse_params
 
-GENERIC_HELP = (
-    "every world served by sme (any World, any Gymnasium environment) also takes the generic changes "
-    "reverse, permute, gain, lesion, noise, delay and restore, unless it has its own of that name "
-    "(`sme perturb --list --world ID`)"
-)
+#: the generic kinds, which every world our node serves takes (worlds.body_changes)
+GENERIC_KINDS = {
+    "reverse": "a motor's sign (a box dimension mirrored, or a discrete action swapped with its opposite)",
+    "permute": "actions or action dimensions exchanged (--param order=rotate|a:b|2,0,1)",
+    "gain": "a weaker or stronger motor (--param gain=G: a box dimension scaled, a discrete action repeated)",
+    "lesion": "an action that no longer acts (--param index=K), or a sensor region that reads 0 (--param what=sensor)",
+    "noise": "sensor noise (--param sd=0.05)",
+    "delay": "actions applied late (--param steps=K)",
+    "restore": "every generic change undone (and the world's own heal)",
+}
 
+#: the kinds some worlds have of their own (they take precedence over a generic kind of the same name)
 KINDS = {
     "lesion": "retina: fields within --param radius=R px of (u, v) px read 0 (default a small off-centre part "
     "of the fovea: u=6 v=0 radius=6); arm: --param joint=NAME locked (where it is, or at=RAD)",
     "reverse": "retina: swap up/down motor commands (again to restore); arm: flip --param joint=NAME's sign",
     "noise": "retina: additive sensor noise, --param sd=0.05",
-    "heal": "undo every perturbation",
-    "restore": "generic: every generic change undone (and the world's own heal)",
-    "permute": "generic: actions or action dimensions exchanged, --param order=rotate|a:b|2,0,1",
-    "delay": "generic: actions applied --param steps=K steps late",
+    "heal": "retina, rovingeye, arm, vergence, mountain car: undo every perturbation",
     "gain": "rovingeye: every move becomes --param gain=G times longer (default 1.5; a different eye muscle); "
     "arm: --param joint=NAME gain=G scales that joint's step",
     "morph": "mountain car/vergence: change the body, e.g. --baseline 1.4 or --vertical (same as --param "
@@ -76,11 +79,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "perturb",
         help="perturb a running world (reverse, permute, gain, lesion, noise, delay, restore, morph...)",
-        description="Publish a Control message to a running world. Kinds: "
+        description="Publish a Control message to a running world; the agent is not told: it has to notice the "
+        "change from its own reward. Every world served by sme (any World, any Gymnasium environment) takes the "
+        "generic kinds: "
+        + "; ".join(f"{k}: {v}" for k, v in GENERIC_KINDS.items())
+        + ". Some worlds have kinds of their own, which take precedence over a generic kind of the same name: "
         + "; ".join(f"{k}: {v}" for k, v in KINDS.items())
-        + f". {GENERIC_HELP}. The agent is not told: it has to notice the change from its own reward.",
+        + ". `sme perturb --list --world ID` prints the kinds a running world takes.",
     )
-    p.add_argument("kind", nargs="?", help="perturbation kind: " + ", ".join(KINDS) + " (see --list)")
+    p.add_argument(
+        "kind", nargs="?", help="perturbation kind: " + ", ".join({**GENERIC_KINDS, **KINDS}) + " (see --list)"
+    )
     p.add_argument("--world", default=None, help="id of the running world (required unless --list)")
     p.add_argument(
         "--list",
