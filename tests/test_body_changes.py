@@ -434,6 +434,25 @@ def test_embeddable_env_takes_a_perturb_hook_and_its_kinds_take_precedence():
     w.close()
 
 
+class Corridor3(Corridor):
+    """The corridor with a third action (stay) and the opposites it declares itself."""
+
+    sme_opposites = [(0, 1)]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.action_space = spaces.Discrete(3)
+
+
+gym.register("test/Corridor3-v0", entry_point=Corridor3, max_episode_steps=30)
+
+
+def test_an_environment_declares_its_opposite_actions():
+    w = BodyChanges(GymWorld("test/Corridor3-v0", "c3"))
+    assert change(w, "reverse") == "swapped actions 0<->1"  # not the mirrored 0<->2
+    w.close()
+
+
 def test_a_hook_without_its_declaration_is_refused_at_start_naming_the_fix():
     class Undeclared(Corridor):
         sme_perturbations = None

@@ -74,16 +74,39 @@ def test_sme_perturb_applies_every_generic_kind_to_gymnasium_worlds(procs, endpo
     _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint, wid)
 
 
-@pytest.mark.parametrize("route", ["world_subclass", "gymnasium"])
-def test_sme_perturb_applies_every_generic_kind_to_the_tutorial_worlds(procs, endpoint, capsys, tmp_path, route):
+SERVED = """
+from my_robot.beacons import Beacons
+
+
+class Served(Beacons):
+    \"\"\"The tutorial's walker with the constructor `sme world package.module:Class` calls.\"\"\"
+
+    kind = "served-beacons"
+
+    def __init__(self, world_id="served", seed=0, params=None):
+        super().__init__(world_id, seed)
+"""
+
+
+@pytest.mark.parametrize("route", ["world_subclass", "world_by_path", "gymnasium"])
+def test_sme_perturb_applies_every_generic_kind_to_the_tutorial_worlds(
+    procs, endpoint, capsys, tmp_path, monkeypatch, route
+):
     """The tutorials of docs/tutorials, run as written from a directory of the user's own: the
-    `World` subclass from a package (`python -m my_robot.beacons`) and the Gymnasium room."""
+    `World` subclass from a package (`python -m my_robot.beacons`, and served by path with `sme
+    world my_robot.served:Served`) and the Gymnasium room."""
     procs.start("agent", "--listen", endpoint, "-q")
     tutorials = ROOT / "docs" / "tutorials"
+    (tmp_path / "my_robot").mkdir()
+    (tmp_path / "my_robot" / "__init__.py").write_text("")
+    shutil.copy(tutorials / "beacons.py", tmp_path / "my_robot" / "beacons.py")
+    if route == "world_by_path":
+        (tmp_path / "my_robot" / "served.py").write_text(SERVED)
+        monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
+        procs.start("world", "my_robot.served:Served", "--id", "served", "--connect", endpoint, "-q")
+        _every_kind_applies_and_bad_ones_are_refused(capsys, endpoint, "served")
+        return
     if route == "world_subclass":
-        (tmp_path / "my_robot").mkdir()
-        (tmp_path / "my_robot" / "__init__.py").write_text("")
-        shutil.copy(tutorials / "beacons.py", tmp_path / "my_robot" / "beacons.py")
         cmd, wid = [sys.executable, "-m", "my_robot.beacons", "--connect", endpoint], "beacons"
     else:
         shutil.copy(tutorials / "gym_room.py", tmp_path / "gym_room.py")

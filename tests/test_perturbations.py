@@ -269,5 +269,7 @@ def test_sme_perturb_exits_1_when_the_world_refuses_or_does_not_answer(endpoint)
         assert out.returncode == 1, (out.stdout, out.stderr)
         assert "world x1 refused melt: too hot to melt" in out.stderr
         assert seen and seen[-1].id != 0
+        out = _sme("perturb", "--list", "--world", "x1", "--connect", endpoint)  # it advertises nothing
+        assert out.returncode == 0 and "does not say which perturbations it takes" in out.stdout, out
         out = _sme("perturb", "silence", "--world", "x1", "--timeout", "1", "--connect", endpoint)
         assert out.returncode == 1 and "did not answer within 1 s" in out.stderr, out.stderr
