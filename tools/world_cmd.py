@@ -9,8 +9,9 @@ import sys
 
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.params import ParamError, assignments, table_text
+from sensorimotor.worlds.names import GYM_PREFIX
 from sensorimotor.worlds.node import WorldNode
-from sensorimotor.worlds.registry import GYM_PREFIX, WORLDS, make_world, world_kind
+from sensorimotor.worlds.registry import WORLDS, make_world, world_kind
 
 log = logging.getLogger("sme.world")
 

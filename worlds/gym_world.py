@@ -54,8 +54,8 @@ from gymnasium import spaces
 from sensorimotor.protocol.messages import ActionSpace, GoalRule, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import ParamError, _scalar, option, parse, suggest, table_text, unknown_name
 from sensorimotor.worlds.base import StepResult, World
+from sensorimotor.worlds.names import GYM_PREFIX, import_user_module
 from sensorimotor.worlds.quiet import stdout_to_stderr
-from sensorimotor.worlds.registry import GYM_PREFIX
 
 log = logging.getLogger("sme.world")
 
@@ -136,7 +136,7 @@ def env_id_of(name: str) -> str:
     module, sep, rest = env_id.partition(":")
     if sep and rest:
         try:
-            importlib.import_module(module)
+            import_user_module(module)
         except ImportError as e:
             raise ParamError(f"gym:{env_id}: cannot import {module!r}, which should register {rest!r}: {e}") from None
         return rest

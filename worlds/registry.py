@@ -17,6 +17,7 @@ from typing import Any, Protocol
 
 from sensorimotor.protocol.params import ParamError, parse, unknown_name
 from sensorimotor.worlds.base import World
+from sensorimotor.worlds.names import GYM_PREFIX, import_user_module
 
 
 class WorldClass(Protocol):
@@ -83,7 +84,6 @@ WORLDS: dict[str, WorldKind] = {
 }
 
 
-GYM_PREFIX = "gym:"
 #: the entry-point group through which installed packages offer World subclasses by name
 ENTRY_POINT_GROUP = "sensorimotor.worlds"
 
@@ -103,7 +103,7 @@ def _outside_kind(name: str) -> WorldKind | None:
     if not module or not cls:
         raise ParamError(f"world {name!r}: expected package.module:Class")
     try:
-        mod = importlib.import_module(module)
+        mod = import_user_module(module)
     except ImportError as e:
         raise ParamError(f"world {name!r}: cannot import {module!r}: {e}") from None
     klass = getattr(mod, cls, None)
