@@ -123,3 +123,51 @@ def test_demo_retina_at_its_default_length_shows_an_embedding(endpoint):
     assert re.search(r"\[retina\] embedding v1 ", out.stdout), out.stdout[-2000:]
     assert "final embedding v" in out.stdout
     assert "argv[0]" not in out.stdout and "pybullet build time" not in out.stdout
+
+
+_MY_ENV = """
+import gymnasium as gym
+import numpy as np
+
+
+class MyLine(gym.Env):
+    observation_space = gym.spaces.Discrete(5)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.s = 0
+        return self.s, {}
+
+    def step(self, a):
+        self.s = int(np.clip(self.s + (1 if a else -1), 0, 4))
+        return self.s, float(self.s == 4), self.s == 4, False, {}
+
+
+gym.register(id="MyLine-v0", entry_point=MyLine)
+"""
+
+
+def _sme_script(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    """`sme ...` as the console script runs it: the current directory is not on the import path
+    (`python -P`, unlike `python -m`)."""
+    return subprocess.run(
+        [sys.executable, "-P", "-m", "sensorimotor.tools.cli", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def test_gym_module_in_the_current_folder_is_found_without_pythonpath(tmp_path):
+    """`sme world gym:mymodule:MyEnv-v0` from the module's own folder (issue 40, first hour 1)."""
+    (tmp_path / "my_line_env.py").write_text(_MY_ENV)
+    out = _sme_script("world", "gym:my_line_env:MyLine-v0", "--list-params", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "start_grid" in out.stdout
+    # a module that is nowhere: the error says where it looked and how to point elsewhere
+    out = _sme_script("world", "gym:no_such_env_mod:Nope-v0", "--list-params", cwd=tmp_path)
+    assert out.returncode == 2
+    assert "cannot import 'no_such_env_mod'" in out.stderr and "PYTHONPATH" in out.stderr
+    assert str(tmp_path) in out.stderr

@@ -23,7 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Serve a world on the bus in lockstep: publish observation k, wait for the "
         "agent's action k (resend after --resend seconds, then keep waiting). The agent "
         "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ", and gym:ENV_ID for any "
-        "Gymnasium environment with discrete actions (its keyword arguments as --param k=v). "
+        "Gymnasium environment (gym:module:ENV_ID imports module first, from the current folder too; the "
+        "environment's keyword arguments as --param k=v). "
         "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.",
     )
     p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)) + ", or gym:ENV_ID")
