@@ -53,13 +53,6 @@ def evaluate(world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int 
     return Evaluation(float(np.mean(one)), float(np.mean(two)), float(np.mean(act)))
 
 
-def saccade_errors(
-    world: RetinaWorld, program: RetinaProgram, n: int = 30, seed: int = EVAL_SEED
-) -> tuple[float, float]:
-    e = evaluate(world, program, n, seed)
-    return e.one, e.two
-
-
 def e_geometry_px(world: RetinaWorld, program: RetinaProgram) -> float:
     """E_geometry (Eq 4.6) converted from motor units to px at the retina centre."""
     pos = world.truth().tensors["positions"]
