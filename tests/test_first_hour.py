@@ -117,12 +117,14 @@ def test_demo_plot_writes_the_9x9_lattice_coloured_by_true_cell(endpoint, tmp_pa
 @pytest.mark.integration
 def test_demo_retina_at_its_default_length_shows_an_embedding(endpoint):
     """The retina's first embedding comes after 1,000 saccades, past the default 15 s on a slow
-    machine: an unbounded demo waits for it; PyBullet's start-up line stays off stdout."""
+    machine: an unbounded demo waits for it; PyBullet's start-up lines are shown nowhere (issue 40:
+    `argv[0]=` was back on the terminal's second line, through stderr)."""
     out = _sme("demo", "--world", "retina", "--listen", endpoint, timeout=300)
     assert out.returncode == 0, (out.stdout[-2000:], out.stderr[-2000:])
     assert re.search(r"\[retina\] embedding v1 ", out.stdout), out.stdout[-2000:]
     assert "final embedding v" in out.stdout
-    assert "argv[0]" not in out.stdout and "pybullet build time" not in out.stdout
+    for stream in (out.stdout, out.stderr):
+        assert "argv[0]" not in stream and "pybullet build time" not in stream, stream[:500]
 
 
 _MY_ENV = """
@@ -171,3 +173,49 @@ def test_gym_module_in_the_current_folder_is_found_without_pythonpath(tmp_path):
     assert out.returncode == 2
     assert "cannot import 'no_such_env_mod'" in out.stderr and "PYTHONPATH" in out.stderr
     assert str(tmp_path) in out.stderr
+
+
+def test_the_zoo_hook_snippet_is_complete_and_embeddable():
+    """docs/zoo.md's hook snippet runs as written (it once used an undefined `MyLine`) and makes a
+    world with 14 start states and their truth."""
+    from sensorimotor.worlds.registry import make_world
+
+    text = (ROOT / "docs" / "zoo.md").read_text()
+    section = text[text.index("## Make your own environment embeddable") :]
+    block = re.search(r"```python\n(.*?)```", section, re.S)
+    assert block and "class MyLine" in block.group(1)
+    exec(compile(block.group(1), "docs/zoo.md", "exec"), {"__name__": "zoo_snippet"})
+    with make_world("gym:my/Line-v0", "line", 0) as w:
+        spec = w.spec()
+        assert spec.n_starts == 14 and spec.goal == "terminated"
+        truth = w.truth()
+        assert truth is not None and truth.tensors["positions"][:, 0].tolist() == list(range(14))
+        assert int(np.argmax(w.reset(start=5).tensors["observation"])) == 5
+
+
+_EVERY_WORLD = """
+import sys
+import numpy as np
+from sensorimotor.worlds.registry import WORLDS, make_world
+for name in sorted(WORLDS) + ["gym:FrozenLake-v1"]:
+    with make_world(name, None, 0, {}) as w:
+        w.reset(start=0 if w.spec().n_starts else None)
+        print("made", name, flush=True)
+print("something of our own on stderr", file=sys.stderr)
+"""
+
+
+def test_no_world_prints_pybullet_start_up_lines():
+    """Every world kind is made and reset (imported and connected, as `sme demo --world NAME` and
+    `sme world NAME` do) in a fresh process: PyBullet's `pybullet build time` and `argv[0]=` lines
+    reach neither stdout nor stderr, and what else is written there still is."""
+    from sensorimotor.worlds.registry import WORLDS
+
+    out = subprocess.run(
+        [sys.executable, "-P", "-c", _EVERY_WORLD], cwd=ROOT, capture_output=True, text=True, timeout=240
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.count("made ") == len(WORLDS) + 1
+    assert "something of our own on stderr" in out.stderr
+    for stream in (out.stdout, out.stderr):
+        assert "argv[0]" not in stream and "pybullet build time" not in stream, stream[:1000]

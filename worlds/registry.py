@@ -18,6 +18,7 @@ from typing import Any, Protocol
 from sensorimotor.protocol.params import ParamError, parse, unknown_name
 from sensorimotor.worlds.base import World
 from sensorimotor.worlds.names import GYM_PREFIX, import_user_module
+from sensorimotor.worlds.quiet import pybullet_quiet
 
 
 class WorldClass(Protocol):
@@ -41,7 +42,8 @@ class WorldKind:
     absolute: bool = False  # `module` is a full import path (a world from another package)
 
     def _module(self) -> Any:
-        return importlib.import_module(self.module if self.absolute else f"sensorimotor.worlds.{self.module}")
+        with pybullet_quiet():  # the PyBullet worlds: its import line is no output of ours
+            return importlib.import_module(self.module if self.absolute else f"sensorimotor.worlds.{self.module}")
 
     def world_class(self) -> WorldClass:
         """Import the world's module and return its World class."""
