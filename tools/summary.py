@@ -130,6 +130,9 @@ def verdict(
     k = len(tail)
     if k == 1:
         lines.append("  one version only: too early to say whether the map holds; run longer to see it settle")
+    elif near_best and final > POOR:
+        span = f"{min(tail):.4f}-{max(tail):.4f}"
+        lines.append(f"  the last {k} versions ({span}) agree, but at this error there is no map to hold yet")
     elif near_best:
         span = f"{min(tail):.4f}-{max(tail):.4f}"
         lines.append(f"  the last {k} versions ({span}) are near the best (within {NEAR_FACTOR:g}x): the map held")
@@ -141,6 +144,10 @@ def verdict(
     else:
         lines.append(f"  the final version is {final / max(best, 1e-12):.1f}x the best (v{vb}): the map did not hold")
     goal = last.metrics.get("goal_reached_fraction")
+    if goal is not None:
+        lines.append(
+            f"  the greedy policy reached the goal from {goal:.0%} of the {n} start states of the final version"
+        )
     if final > POOR:
         why = "this is not a map of the world"
         if goal is not None and goal == 0:
@@ -153,3 +160,43 @@ def verdict(
     elif best < first and near(final, best):
         lines.append(f"  the error fell from {first:.4f} (v{v1}) to {final:.4f} as the agent learned")
     return RunVerdict(tuple(lines), True, first, best, final, near_best)
+
+
+def settled(embeddings: Sequence[Embedding], has_truth: bool = True) -> bool:
+    """Whether a run has shown what it can: a world without truth once embedded; a scored one when
+    its map held (the last `LAST` versions near the best, and the final error at most `POOR`)."""
+    embeddings = [e for e in embeddings if e.trigger != "policy_map"]
+    if not embeddings:
+        return False
+    scored = _scored(embeddings)
+    if not has_truth or not scored:
+        return True
+    tail = [err for _, err in scored[-LAST:]]
+    best = min(err for _, err in scored)
+    return len(tail) == LAST and tail[-1] <= POOR and all(near(err, best) for err in tail)
+
+
+def still_to_go(embeddings: Sequence[Embedding], steps_per_second: float) -> str:
+    """What a run stopped at its bound before its map held would need, from its own pace: the steps
+    (and seconds at `steps_per_second`) until the error falls below `POOR`, extrapolating the fall
+    from the first scored version to the best one (log error linear in steps); or why no estimate."""
+    pts = [
+        (int(e.step), float(e.procrustes_error))
+        for e in embeddings
+        if e.trigger != "policy_map" and e.procrustes_error is not None and math.isfinite(e.procrustes_error)
+    ]
+    pts = [(s, err) for s, err in pts if err > 0]
+    if len(pts) < 2:
+        return "fewer than two scored versions, so no pace to go by"
+    (s0, e0), (sb, eb) = pts[0], min(pts, key=lambda p: p[1])
+    if eb <= POOR:
+        return "the error was below the bar once: a longer run should let the map settle"
+    if sb <= s0 or eb >= e0:
+        return f"the error has not fallen since the first version ({e0:.4f}), so no estimate from this run"
+    rate = math.log(eb / e0) / (sb - s0)  # per step, negative
+    more = max(0.0, math.log(POOR / eb) / rate - (pts[-1][0] - sb))
+    secs = f", about {more / steps_per_second:,.0f} s more at this run's pace" if steps_per_second > 0 else ""
+    return (
+        f"at the pace from v1 to the best ({e0:.4f} -> {eb:.4f} in {sb - s0:,} steps), about {more:,.0f} more "
+        f"steps to an error below {POOR:g}{secs}"
+    )
