@@ -283,7 +283,9 @@ def test_demo_of_a_gym_world_runs_until_its_map_holds(endpoint):
     of that), and its summary says so with the goal fraction; every embedding line carries goal=."""
     out = _sme("demo", "--world", "gym:CliffWalking-v1", "--listen", endpoint, timeout=300)
     assert out.returncode == 0, (out.stdout[-2000:], out.stderr[-2000:])
-    assert "(columns: procrustes = error" in out.stdout
+    assert "(columns: procrustes = error" in out.stdout and "goal = fraction of the start states" in " ".join(
+        out.stdout.split()
+    )
     lines = [ln for ln in out.stdout.splitlines() if "] embedding v" in ln]
     assert lines and all("goal=" in ln for ln in lines)
     assert "the map held" in out.stdout and "reached the goal from" in out.stdout

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import textwrap
 import threading
 import time
 from typing import Any
@@ -108,7 +109,8 @@ def main_args(args: argparse.Namespace) -> int:
         stamp = f"{time.monotonic() - t0:6.1f}s "
         if isinstance(msg, Embedding):
             if not embeddings:
-                say(f"{'':8}(columns: {EMBEDDING_COLUMNS})")
+                legend = f"(columns: {EMBEDDING_COLUMNS})"
+                say("\n".join(textwrap.wrap(legend, 100, initial_indent=" " * 8, subsequent_indent=" " * 9)))
             embeddings.append(msg)
             say(stamp + format_embedding(msg))
         elif isinstance(msg, AgentEvent):

@@ -77,7 +77,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("chapter", choices=sorted(CHAPTERS) + ["all"], help="which experiment, or all")
     p.add_argument("--runs", type=int, default=10, help="seeded runs per condition (default 10)")
-    p.add_argument("--quick", action="store_true", help="shortened runs, for a first look (about a minute)")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="shortened runs, for a first look (on 2 cores: seconds for gridworld, about 8 min for retina and 7 "
+        "for mountaincar, 17 min for all; see docs/reproduce.md)",
+    )
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes")
     p.add_argument("--out", default="out", help="output folder (default ./out)")
     p.add_argument(
