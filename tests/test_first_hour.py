@@ -308,3 +308,14 @@ def test_experiment_help_says_its_first_paragraph_whole(module):
     assert out.returncode == 0, out.stderr
     description = out.stdout.split("\n\n")[1]
     assert description.rstrip().endswith((".", ")")), description
+
+
+def test_pybullet_quiet_drops_only_the_start_up_lines_and_nests(capfd):
+    from sensorimotor.worlds.quiet import pybullet_quiet
+
+    with pybullet_quiet():
+        os.write(1, b"argv[0]=\nours on stdout\n")
+        with pybullet_quiet():  # a nested use (a module that makes a world while imported) must not wait
+            os.write(2, b"pybullet build time: Jan 29 2025 23:17:20\nours on stderr\n")
+    out, err = capfd.readouterr()
+    assert out == "ours on stdout\n" and err == "ours on stderr\n"

@@ -14,6 +14,7 @@ import threading
 from collections.abc import Iterator
 
 _FD_LOCK = threading.Lock()
+_INSIDE = threading.local()  # this thread holds the descriptors already (a nested call)
 #: PyBullet's start-up lines: dropped; every other line written meanwhile is passed on
 NOISE = re.compile(rb"^(pybullet build time: .*|argv\[\d+\]=.*)$")
 
@@ -35,30 +36,41 @@ def pybullet_quiet() -> Iterator[None]:
     except (AttributeError, OSError, ValueError):
         yield
         return
+    if getattr(_INSIDE, "held", False):  # e.g. a user's module that makes a world while it is imported
+        yield
+        return
     with _FD_LOCK:
+        _INSIDE.held = True
+        try:
+            with _held(fds):
+                yield
+        finally:
+            _INSIDE.held = False
+
+
+@contextlib.contextmanager
+def _held(fds: tuple[int, ...]) -> Iterator[None]:
+    for f in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            f.flush()
+    _flush_c_stdio()
+    held = []
+    for fd in fds:
+        tmp = tempfile.TemporaryFile()
+        held.append((fd, os.dup(fd), tmp))
+        os.dup2(tmp.fileno(), fd)
+    try:
+        yield
+    finally:
         for f in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 f.flush()
         _flush_c_stdio()
-        held = []
-        for fd in fds:
-            tmp = tempfile.TemporaryFile()
-            held.append((fd, os.dup(fd), tmp))
-            os.dup2(tmp.fileno(), fd)
-        try:
-            yield
-        finally:
-            for f in (sys.stdout, sys.stderr):
-                with contextlib.suppress(Exception):
-                    f.flush()
-            _flush_c_stdio()
-            for fd, saved, tmp in held:
-                os.dup2(saved, fd)
-                os.close(saved)
-                tmp.seek(0)
-                kept = b"".join(
-                    ln for ln in tmp.read().splitlines(keepends=True) if not NOISE.match(ln.rstrip(b"\r\n"))
-                )
-                tmp.close()
-                while kept:
-                    kept = kept[os.write(fd, kept) :]
+        for fd, saved, tmp in held:
+            os.dup2(saved, fd)
+            os.close(saved)
+            tmp.seek(0)
+            kept = b"".join(ln for ln in tmp.read().splitlines(keepends=True) if not NOISE.match(ln.rstrip(b"\r\n")))
+            tmp.close()
+            while kept:
+                kept = kept[os.write(fd, kept) :]
