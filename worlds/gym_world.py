@@ -24,7 +24,9 @@ Start states and truth come from the first of these that fits:
 * classic control whose ``unwrapped.state`` can be set (`STATE_GRIDS`): a `start_grid` x
   `start_grid` grid over two state variables, truth those variables scaled to 0..1;
 * MiniGrid: every free cell the agent can stand on (facing east, or in all four headings with
-  `headings=4`), truth the cell;
+  `headings=4`), truth the cell; the layout is the one the world's seed draws, at every reset
+  (LavaGap's gap, SimpleCrossing's walls), and a grid larger than the agent's view is served whole
+  (`view`);
 * panda-gym reach tasks: the target held at the middle of its range, start states a lattice of
   hand positions (`start_grid` per axis, at most 4) reached by inverse kinematics, truth the hand
   position;
@@ -89,6 +91,14 @@ class GymWorldParams:
         max=5.0,
     )
     hand_velocity: bool = option(False, "panda-gym: serve the hand's velocity too, beside its position")
+    view: str = option(
+        "auto",
+        "MiniGrid: what the agent sees - full (the whole grid, MiniGrid's own FullyObsWrapper: one "
+        "observation per cell and heading) or agent (its egocentric view ahead, which shows cells of a "
+        "room wider than the view alike, so the same observation and action lead to different places); "
+        "auto: full when the grid is wider or taller than the agent's view, else agent",
+        choices=("auto", "full", "agent"),
+    )
     headings: int = option(
         1,
         "MiniGrid: start headings per cell (1: every start faces east; 4: all four - each start's "
@@ -410,6 +420,11 @@ class GymWorld(World):
             raise ParamError(f"gym:{env_id} cannot be made here: {e}") from None
         self.kind = GYM_PREFIX + env_id
         self.u: Any = self.env.unwrapped
+        self._full_view: Any = None  # MiniGrid's FullyObsWrapper, when the whole grid is served
+        if type(self.u).__module__.startswith("minigrid") and self._wants_full_view():
+            from minigrid.wrappers import FullyObsWrapper
+
+            self.env = self._full_view = FullyObsWrapper(self.env)
         act = self.env.action_space
         if isinstance(act, spaces.Discrete):
             self._a0, self._na = int(act.start), int(act.n)
@@ -590,6 +605,14 @@ class GymWorld(World):
         self._set_start = lambda start: reset_to(start)
         return f"{len(self._starts)} start states from the environment's own hook"
 
+    def _wants_full_view(self) -> bool:
+        """MiniGrid: serve the whole grid (`view`; auto: when the grid is larger than the agent's view)."""
+        if self.params.view != "auto":
+            return self.params.view == "full"
+        u: Any = self.u
+        side = int(getattr(u, "agent_view_size", 7))
+        return max(int(getattr(u, "width", 0)), int(getattr(u, "height", 0))) > side
+
     def _minigrid_starts(self) -> str:
         u: Any = self.u
         cells = [
@@ -607,7 +630,8 @@ class GymWorld(World):
         def set_state(start: Any) -> Any:
             (x, y), d = start
             u.agent_pos, u.agent_dir = (int(x), int(y)), int(d)
-            return u.gen_obs()
+            obs = u.gen_obs()
+            return obs if self._full_view is None else self._full_view.observation(obs)
 
         self._set_start = set_state
         return (
@@ -777,7 +801,10 @@ class GymWorld(World):
         declared one when None and `random_starts`; the environment's own reset otherwise)."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
-        env_seed = seed if seed is not None else (self.seed if self._first_reset else None)
+        # a MiniGrid layout is drawn at reset (LavaGap's gap, SimpleCrossing's walls): every reset
+        # draws the seed's one, so the start states and their truth stay those of the served world
+        fixed = self._first_reset or self._family == "minigrid"
+        env_seed = seed if seed is not None else (self.seed if fixed else None)
         self._first_reset = False
         obs, _ = self.env.reset(seed=env_seed)
         n = len(self._starts)

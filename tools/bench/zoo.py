@@ -34,11 +34,33 @@ class ZooWorld:
 
     label: str
     world: str
-    params: dict[str, str] = field(default_factory=dict)
+    params: dict[str, Any] = field(default_factory=dict)
     program: dict[str, str] = field(default_factory=dict)
     steps: int = 100_000
     quick_steps: int = 20_000
     needs: str = ""  # a module the world needs (skipped, and said, when missing)
+
+
+def _random_lake(seed: int) -> tuple[str, ...]:
+    """Gymnasium's random 10 x 10 FrozenLake map of `seed` (p = 0.8 frozen)."""
+    from gymnasium.envs.toy_text.frozen_lake import generate_random_map
+
+    return tuple(generate_random_map(size=10, p=0.8, seed=seed))
+
+
+def _lakes() -> tuple[ZooWorld, ...]:
+    return tuple(
+        ZooWorld(
+            f"FrozenLake random 10x10 (map {s}){'' if slip else ', not slippery'}",
+            "gym:FrozenLake-v1",
+            {"desc": list(_random_lake(s)), "is_slippery": str(slip).lower()},
+            {},
+            100_000,
+            30_000,
+        )
+        for slip in (False, True)
+        for s in (0, 1, 2)
+    )
 
 
 ZOO: tuple[ZooWorld, ...] = (
@@ -58,6 +80,9 @@ ZOO: tuple[ZooWorld, ...] = (
     ),
     ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 50_000, 10_000),
     ZooWorld("MiniGrid Empty 8x8", "gym:MiniGrid-Empty-8x8-v0", {}, {}, 60_000, 20_000, "minigrid"),
+    ZooWorld("MiniGrid Empty 16x16", "gym:MiniGrid-Empty-16x16-v0", {}, {}, 100_000, 30_000, "minigrid"),
+    ZooWorld("MiniGrid LavaGap S7", "gym:MiniGrid-LavaGapS7-v0", {}, {}, 100_000, 30_000, "minigrid"),
+    ZooWorld("MiniGrid SimpleCrossing S9N1", "gym:MiniGrid-SimpleCrossingS9N1-v0", {}, {}, 100_000, 30_000, "minigrid"),
     ZooWorld("MountainCar", "gym:MountainCar-v0", {}, {}, 100_000, 30_000),
     ZooWorld("MountainCarContinuous", "gym:MountainCarContinuous-v0", {}, {}, 100_000, 30_000),
     ZooWorld("MountainCarContinuous, DTW", "gym:MountainCarContinuous-v0", {}, {"distance": "dtw"}, 100_000, 30_000),
@@ -80,6 +105,7 @@ ZOO: tuple[ZooWorld, ...] = (
         10_000,
         "panda_gym",
     ),
+    *_lakes(),
 )
 
 
