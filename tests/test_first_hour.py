@@ -319,3 +319,23 @@ def test_pybullet_quiet_drops_only_the_start_up_lines_and_nests(capfd):
             os.write(2, b"pybullet build time: Jan 29 2025 23:17:20\nours on stderr\n")
     out, err = capfd.readouterr()
     assert out == "ours on stdout\n" and err == "ours on stderr\n"
+
+
+def test_a_map_the_program_holds_is_held_after_one_version():
+    """The generic program publishes a new version only for a better policy (watched), or says its
+    stochastic world's policy `settled`: one version can be the map that held, but never at 0.8."""
+    from sensorimotor.tools.summary import settled
+
+    def watched(version, err, step=1000):
+        e = _at(version, err, step, goal=1.0)
+        return dataclasses.replace(e, metrics={**e.metrics, "watched": 1.0})
+
+    one = [watched(1, 0.0499)]
+    assert settled(one) and "the program holds this version" in _text(verdict(one))
+    assert "the map held" in _text(verdict(one))
+    poor = [watched(1, 0.82)]
+    assert not settled(poor) and "held" not in _text(verdict(poor))
+    lake = [_at(1, 0.57, 11_510, 0.6), _at(2, 0.2165, 25_396, 0.74)]
+    ev = AgentEvent("a0", "w", "policy_iteration", "watched from here", step=26_000, reason="settled")
+    assert not settled(lake) and settled(lake, [ev])
+    assert "the map held" in _text(verdict(lake, [ev])) and "the map held" not in _text(verdict(lake))

@@ -1,8 +1,8 @@
 """`sme demo`: the agent daemon and one world in one command, with progress and an honest summary.
 
 Unbounded (no --seconds, no --steps) it runs 15 s and then on until the world's map holds (the
-last versions near the best, at an error that is a map: `tools.summary.settled`; a world without
-truth: its first embedding), at most 180 s; stopped at that bound it says what the map would need
+last versions near the best, or one the program holds, at an error that is a map:
+`tools.summary.settled`; a world without truth: its first embedding), at most 180 s; stopped at that bound it says what the map would need
 at the run's pace. The summary says the first, best and final Procrustes error, whether the last
 versions are near the best, from how many start states the greedy policy reached the goal and,
 when the world was not embedded or cannot be scored, why and what to do (`tools.summary`).
@@ -168,7 +168,7 @@ def main_args(args: argparse.Namespace) -> int:
                     can_embed = not any(
                         e.reason == "no_start_states" for e in events
                     )  # the retina embeds fields, not starts
-                    if bounded or not can_embed or settled(embeddings):
+                    if bounded or not can_embed or settled(embeddings, events):
                         break
                     if el >= MAX_SECONDS:
                         at_bound = True

@@ -128,14 +128,22 @@ def verdict(
         f"best {best:.4f} (v{vb}), final {final:.4f} (v{vf})",
     ]
     k = len(tail)
-    if k == 1:
+    span = f"{min(tail):.4f}-{max(tail):.4f}"
+    kept = program_holds(embeddings, events) and near(final, best)
+    if (k > 1 and near_best) or kept:
+        agree = (
+            f"the last {k} versions ({span}) agree"
+            if k > 1 and near_best
+            else "the program holds this version (it publishes another only for a better policy or after a change)"
+        )
+        if final > POOR:
+            lines.append(f"  {agree}, but at this error there is no map to hold yet")
+        elif k > 1 and near_best:
+            lines.append(f"  the last {k} versions ({span}) are near the best (within {NEAR_FACTOR:g}x): the map held")
+        else:
+            lines.append(f"  {agree}: the map held")
+    elif k == 1:
         lines.append("  one version only: too early to say whether the map holds; run longer to see it settle")
-    elif near_best and final > POOR:
-        span = f"{min(tail):.4f}-{max(tail):.4f}"
-        lines.append(f"  the last {k} versions ({span}) agree, but at this error there is no map to hold yet")
-    elif near_best:
-        span = f"{min(tail):.4f}-{max(tail):.4f}"
-        lines.append(f"  the last {k} versions ({span}) are near the best (within {NEAR_FACTOR:g}x): the map held")
     elif near(final, best):
         lines.append(
             "  the error was still falling at the end (the final version is at or near the best): "
@@ -162,18 +170,34 @@ def verdict(
     return RunVerdict(tuple(lines), True, first, best, final, near_best)
 
 
-def settled(embeddings: Sequence[Embedding], has_truth: bool = True) -> bool:
+def program_holds(embeddings: Sequence[Embedding], events: Sequence[AgentEvent] = ()) -> bool:
+    """Whether the program says it holds its last version: the embedding is of a *watched* policy
+    (``watched`` metric 1: a new version comes only with a better policy), or a ``settled`` event
+    came at or after it (a stochastic world's policy that newer ones did not beat)."""
+    embeddings = [e for e in embeddings if e.trigger != "policy_map"]
+    if not embeddings:
+        return False
+    last = embeddings[-1]
+    return last.metrics.get("watched") == 1.0 or any(ev.reason == "settled" and ev.step >= last.step for ev in events)
+
+
+def settled(embeddings: Sequence[Embedding], events: Sequence[AgentEvent] = ()) -> bool:
     """Whether a run has shown what it can: a world without truth once embedded; a scored one when
-    its map held (the last `LAST` versions near the best, and the final error at most `POOR`)."""
+    its map held at an error of at most `POOR`: the last `LAST` versions near the best, or the
+    program holding a last version near the best (`program_holds`)."""
     embeddings = [e for e in embeddings if e.trigger != "policy_map"]
     if not embeddings:
         return False
     scored = _scored(embeddings)
-    if not has_truth or not scored:
+    if not scored:
         return True
     tail = [err for _, err in scored[-LAST:]]
     best = min(err for _, err in scored)
-    return len(tail) == LAST and tail[-1] <= POOR and all(near(err, best) for err in tail)
+    if tail[-1] > POOR:
+        return False
+    if len(tail) == LAST and all(near(err, best) for err in tail):
+        return True
+    return program_holds(embeddings, events) and near(tail[-1], best)
 
 
 def still_to_go(embeddings: Sequence[Embedding], steps_per_second: float) -> str:
