@@ -49,11 +49,16 @@ def reproduce_table(src: Source, text: str) -> str:
 
 
 def demo_output(src: Source, text: str) -> str:
-    """The demo's stdout: its first lines, the last embeddings and the summary."""
+    """The demo's stdout: its first lines up to the second embedding (the column legend included),
+    the last embeddings and the summary."""
     lines = text.rstrip("\n").split("\n")
     cut = lines.index("summary") if "summary" in lines else len(lines)
     progress = [ln for ln in lines[:cut] if ln.strip()]
-    shown = progress[:4] + (["   ..."] if len(progress) > 7 else []) + progress[max(4, len(progress) - 3) :]
+    firsts = [i for i, ln in enumerate(progress) if "] embedding v" in ln][:2]
+    head = firsts[-1] + 1 if firsts else 4
+    shown = (
+        progress[:head] + (["   ..."] if len(progress) > head + 3 else []) + progress[max(head, len(progress) - 3) :]
+    )
     return "```text\n$ " + src.command + "\n" + "\n".join(shown + [""] + lines[cut:]) + "\n```"
 
 
