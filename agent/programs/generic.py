@@ -979,8 +979,9 @@ class GenericProgram(Program):
                 self._note_transition(self._prev_key, pa, obs)
             outcome = "goal" if reached(self.goal, obs) else "failure" if failed(self.goal, obs) else "continue"
             self._fresh = self.model.learn_one(ps, pa, s, outcome) or self._fresh
-            self.new_samples += 1
             self._since_plan += 1
+            if self.phase == "explore":  # a sweep's steps are counted by the model, not toward the next sweep
+                self.new_samples += 1
         self._prev, self._prev_key = None, None
         if self.phase == "explore":
             if sweep and self.spec.n_starts >= 2:
