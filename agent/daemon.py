@@ -28,6 +28,7 @@ from typing import Any
 from sensorimotor.agent.attach import AgentConfig, Restored, attach, program_name, same_body
 from sensorimotor.agent.checkpoint import (
     FORMAT_VERSION,
+    MAX_VERSION,
     Checkpoint,
     CheckpointError,
     check_shapes,
@@ -311,7 +312,16 @@ class AgentDaemon:
             value = int(text)
         except (OSError, ValueError, UnicodeDecodeError):
             return 0
-        return value if 0 <= value < 2**53 else 0
+        if not 0 <= value <= MAX_VERSION:
+            log.warning(
+                "world %s: embedding version high-water mark %s in %s is beyond the wire's range (0 .. %d); ignored",
+                wid,
+                clip(text, 40),
+                self._version_path(wid),
+                MAX_VERSION,
+            )
+            return 0
+        return value
 
     def event(self, world_id: str, kind: str, detail: str, reason: str = "") -> None:
         """Publish an event about a world that has no link (yet), without declaring a publisher for it
@@ -577,6 +587,8 @@ class AgentDaemon:
 
     def _restore(self, spec: WorldSpec, saved: Checkpoint, what: str) -> Restored:
         """The program (and detector) rebuilt from checkpoint `saved`; _Unrestorable says why not."""
+        if saved.world_id != spec.world_id:
+            raise _Unrestorable(f"is for world {saved.world_id!r}, not {spec.world_id!r}")
         try:
             program = make_program(spec, self.seed, **saved.program_params)
             if type(program).__name__ != saved.program_class:
@@ -638,6 +650,13 @@ class AgentDaemon:
             saved = read_checkpoint(path)
         except CheckpointError as e:
             set_aside("bad", f"unreadable ({e})")
+            return None
+        if saved.world_id != spec.world_id:  # a file copied or renamed from another world's
+            set_aside(
+                "other-world",
+                f"saved for world {saved.world_id!r}, not {spec.world_id!r} (a checkpoint is restored only for the "
+                "world it names)",
+            )
             return None
         if not saved.same_body(spec):
             set_aside(
