@@ -77,6 +77,10 @@ def _import_programs() -> None:
             log.debug("program module %s not imported: %s", kind.module, e)
 
 
+class DuplicateAgent(Exception):
+    """Another agent (or worker) with this owner id is alive on the bus (the message says which)."""
+
+
 class _Unrestorable(Exception):
     """A checkpoint whose state this agent's program cannot take (the message says why)."""
 
@@ -229,6 +233,8 @@ class AgentDaemon:
         self._pubs: dict[str, Any] = {}
         self._versions: dict[str, int] = {}  # world -> embedding version high-water mark written
         self._lock = threading.Lock()
+        self._ckpt_lock = threading.Lock()
+        self._unique_checked = False
         # log lines about refused input (bad truths, world events, checkpoints; worlds that cannot be
         # attached): a few per second at most, every item still counted (hostile input comes at bus speed)
         self._warnings = TokenBucket(self.WARN_RATE)
@@ -479,7 +485,7 @@ class AgentDaemon:
             seen = {ln.world_id for ln in extra} | mine
             links = tuple(ln for ln in links if ln.state == "attached" or ln.world_id not in seen) + tuple(extra)
             counters["links"] = len(links)
-            counters["workers"] = len(self.workers) + 1
+            counters["workers"] = len(self._worker_status) + 1  # the processes that answer, this one included
         return AgentStatus(self.owner_id, time.time() - self._started, links, counters, time.time())
 
     def _poll_workers(self) -> None:
@@ -680,6 +686,11 @@ class AgentDaemon:
         state_dir = self.state_dir
         if not state_dir:
             return written
+        with self._ckpt_lock:  # one writer at a time (a worker's exit deadline may write beside close())
+            self._checkpoint_links(state_dir, only, written)
+        return written
+
+    def _checkpoint_links(self, state_dir: str, only: str | None, written: set[str]) -> None:
         for wid, link in list(self.links.items()):
             if (only is not None and wid != only) or wid in self._elsewhere:
                 continue  # another owner answered it since: its file is theirs to write
@@ -692,7 +703,6 @@ class AgentDaemon:
                 written.add(wid)
             except OSError as e:  # e.g. a full disk: the previous checkpoint stays, learning goes on
                 log.error("world %s: checkpoint not written (%s); the previous one is kept", wid, e)
-        return written
 
     def _encoded_state(self, wid: str, link: WorldLink) -> bytes | None:
         """Link `link`'s learned state as checkpoint bytes (None, logged, if it cannot be encoded)."""
@@ -1159,8 +1169,32 @@ class AgentDaemon:
         return released
 
     # main loop ---------------------------------------------------------------------------------
+    UNIQUE_ID_TIMEOUT = 1.0  # seconds the liveliness query for another agent with this id waits
+
+    def check_unique(self) -> None:
+        """Raise DuplicateAgent when an agent with this owner id is alive on the bus already (its
+        liveliness token is there): two processes with one id would both answer its status and
+        fight over its worlds' claims under one name."""
+        if self._unique_checked:
+            return
+        self._unique_checked = True
+        key = keys.alive_agent(self.owner_id)
+        try:
+            alive = self.bus.alive(key, timeout=self.UNIQUE_ID_TIMEOUT)
+        except Exception as e:  # noqa: BLE001 - no answer is no proof of a duplicate: start
+            log.debug("liveliness query %s failed: %s", key, e)
+            return
+        if alive:
+            raise DuplicateAgent(
+                f"an agent with id {self.owner_id!r} is already running on this bus (its liveliness token {key} "
+                "is alive); give this one another --id, or stop that one first (the token of an agent that "
+                "died without closing its connection stays until the zenoh lease expires, 10 s by default)"
+            )
+
     def start(self) -> None:
-        """Declare the status queryable and liveliness token, subscribe, and watch for worlds."""
+        """Refuse an id already alive on the bus (DuplicateAgent), then declare the status
+        queryable and liveliness token, subscribe, and watch for worlds."""
+        self.check_unique()
         self.bus.queryable(keys.agent_status(self.owner_id), self._status, codec.schema_name(AgentStatus))
         if self.all_obs:
             self.bus.subscribe(keys.ALL_OBS, self._on_obs)
