@@ -188,7 +188,11 @@ class AgentDaemon:
         self._failed: set[str] = set()  # claimed worlds whose attach failed (until they vanish)
         self._retry_spec: dict[str, float] = {}  # failed for no spec reply (transient?): tried again from then
         self._retried: set[str] = set()  # worlds tried again after no spec reply (their failure was counted)
-        self._elsewhere: set[str] = set()  # worlds another owner answered after this one (not checkpointed here)
+        self._elsewhere: set[str] = set()  # worlds another owner claimed after this one (a hint: see _newer_elsewhere)
+        self._held: dict[str, tuple[int, float]] = {}  # world -> (lease epoch, time.time() granted) last held here
+        self._other: dict[
+            str, tuple[str, int, float]
+        ] = {}  # world -> (owner, epoch, when): latest lease seen elsewhere
         self.workers = tuple(workers)
         self.all_obs = all_obs
         self._obs_subs: dict[str, list[Any]] = {}  # without all_obs: world -> its obs/truth/event subscribers
@@ -394,6 +398,8 @@ class AgentDaemon:
             )
             return
         why = self.store.offer(owner, wid, shared.data)
+        if why is None:
+            self._note_lease_elsewhere(wid, owner, shared.epoch, shared.saved_at)
         if why is not None:
             self.counters["bad_checkpoint"] += 1
             self._warn("checkpoint shared by %s for world %s refused: %s", owner[:64], wid[:64], why)
@@ -678,6 +684,43 @@ class AgentDaemon:
             return None
         return restored, saved.saved_at
 
+    # whose state is newest: by lease epoch, not by who claimed last ----------------------------------
+    def _note_lease_elsewhere(self, wid: str, owner: str, epoch: int, when: float) -> None:
+        """Another owner held world `wid`'s lease at `epoch` at time `when` (a lease refusal or
+        lease_lost naming it, a checkpoint it shared)."""
+        if not owner or owner == self.owner_id or epoch <= 0:
+            return
+        old = self._other.get(wid)
+        if old is None or when > old[2]:
+            self._other[wid] = (owner, epoch, when)
+
+    def _newer_elsewhere(self, wid: str) -> str | None:
+        """Why another owner holds a newer learned state of world `wid` than this owner's link
+        (None: this owner's is the newest it knows of, so a release checkpoints it).
+
+        Leases decide, not claims: a claim can be withdrawn before its owner answers a single step
+        (the world vanished, a lower owner won), so a world claimed elsewhere after this owner
+        answered it still has its newest state here unless another owner is seen holding its lease
+        after this owner's grant, or wrote the state dir's checkpoint after this owner stopped. A
+        world without leases (epoch 0) falls back to the claims (`_elsewhere`)."""
+        held = self._held.get(wid)
+        other = self._other.get(wid)
+        if other is not None and (held is None or other[2] > held[1]):
+            mine = f"this owner's epoch {held[0]}" if held is not None else "this owner held none"
+            return f"owner {other[0][:64]} held its lease (epoch {other[1]}) after this owner did ({mine})"
+        if held is None and wid in self._elsewhere:
+            return "another owner answered it since (the world grants no leases: its state is that owner's)"
+        if self.state_dir and wid in self._elsewhere:
+            path = self._checkpoint_path(self.state_dir, wid)
+            try:
+                on_disk = read_checkpoint(path) if os.path.exists(path) else None
+            except CheckpointError:
+                on_disk = None
+            stopped = self._stopped_at.get(wid, float("inf"))
+            if on_disk is not None and on_disk.owner not in ("", self.owner_id) and on_disk.saved_at > stopped:
+                return f"owner {on_disk.owner[:64]} wrote {path} after this owner stopped answering it"
+        return None
+
     def checkpoint(self, only: str | None = None) -> set[str]:
         """Write every link's learned state (or only world `only`'s) to STATE_DIR/<world>.ckpt.npz
         (atomically, no pickle). A write that fails (e.g. a full disk) is logged and leaves the
@@ -692,8 +735,10 @@ class AgentDaemon:
 
     def _checkpoint_links(self, state_dir: str, only: str | None, written: set[str]) -> None:
         for wid, link in list(self.links.items()):
-            if (only is not None and wid != only) or wid in self._elsewhere:
-                continue  # another owner answered it since: its file is theirs to write
+            if only is not None and wid != only:
+                continue
+            if link.state != "attached" and self._newer_elsewhere(wid) is not None:
+                continue  # another owner holds a newer state of it: its file is theirs to write
             path = self._checkpoint_path(state_dir, wid)
             data = self._encoded_state(wid, link)
             if data is None:
@@ -727,7 +772,8 @@ class AgentDaemon:
                 saved_at=time.time(),
                 steps=link.learned_steps,
                 owner=self.owner_id,
-                epoch=link.epoch,
+                # the lease the state was learned under (a released link holds none any more)
+                epoch=link.epoch or self._held.get(wid, (0, 0.0))[0],
             )
         try:
             return ckpt.saved_at, encode_checkpoint(ckpt)
@@ -864,6 +910,7 @@ class AgentDaemon:
             )
             return out
         self.counters["lease_refused"] += 1
+        self._note_lease_elsewhere(wid, out.holder, out.epoch, time.time())
         first = wid not in self._waiting
         self._waiting[wid] = time.monotonic()
         if first:
@@ -907,6 +954,7 @@ class AgentDaemon:
                 reason="held" if ev.holder else "free",
             )
             link.set_lease(self.owner_id, 0)  # nothing to give back
+            self._note_lease_elsewhere(wid, ev.holder, ev.holder_epoch, time.time())
             self._release(wid, f"lease lost to {ev.holder or 'nobody'}")
             if ev.holder:
                 self._elsewhere.add(wid)
@@ -1029,6 +1077,8 @@ class AgentDaemon:
         if lease is None:
             return  # held by another live owner: the claim stays, own() asks again
         epoch = lease.epoch if lease.granted else 0
+        if epoch:
+            self._held[wid] = (epoch, time.time())
         try:
             truth = self._fetch(keys.world_truth(wid), Truth, tries=1)
         except (BusError, ProtocolError):
@@ -1130,7 +1180,8 @@ class AgentDaemon:
                 continue
             if now - since < self.link_ttl or link.state == "attached":
                 continue
-            if self.state_dir and wid not in self._elsewhere and wid not in self.checkpoint(only=wid):
+            elsewhere = self._newer_elsewhere(wid)
+            if self.state_dir and elsewhere is None and wid not in self.checkpoint(only=wid):
                 log.warning("world %s: gone %.0f s but its checkpoint failed; link kept", wid, now - since)
                 continue
             if self._gone.pop(wid, None) is None or self.links.get(wid) is not link:
@@ -1141,22 +1192,26 @@ class AgentDaemon:
             self.counters["released"] += 1
             self.counters["dropped"] += link.dropped
             released.append(wid)
-            if self.state_dir and wid in self._elsewhere:
+            held = self._held.pop(wid, None)
+            self._other.pop(wid, None)
+            if self.state_dir and elsewhere is not None:
                 log.info(
-                    "world %s gone %.0f s (link ttl %g s): link released, not checkpointed here (another owner "
-                    "answered it since: its state is that owner's)",
+                    "world %s gone %.0f s (link ttl %g s): link released, not checkpointed here (%s)",
                     wid,
                     now - since,
                     self.link_ttl,
+                    elsewhere,
                 )
             elif self.state_dir and os.path.exists(self._checkpoint_path(self.state_dir, wid)):
                 log.info(
-                    "world %s gone %.0f s (link ttl %g s): checkpointed to %s and released; it is restored "
-                    "from there if it returns",
+                    "world %s gone %.0f s (link ttl %g s): checkpointed to %s (%d steps learned; %s) and "
+                    "released; it is restored from there if it returns",
                     wid,
                     now - since,
                     self.link_ttl,
                     self._checkpoint_path(self.state_dir, wid),
+                    link.learned_steps,
+                    f"the newest state: lease epoch {held[0]} was the last seen" if held else "no lease",
                 )
             else:
                 log.info(
