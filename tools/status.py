@@ -20,7 +20,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Query every agent on the bus (each daemon, and each worker of `sme agent --workers N`): "
         "uptime, the worlds it owns (its claims), each world link (state, steps, episodes, embedding version, "
         "last Procrustes error, rejected inputs by kind) and daemon counters; then the worlds alive that no "
-        "agent owns. With --agent ID, only that agent.",
+        "agent owns. An agent alive on the bus that gives no status is listed as NOT ANSWERING, and an id "
+        "answered by two processes is flagged; either makes the command exit 1 (2: the bus cannot be "
+        "reached). With --agent ID, only that agent.",
     )
     p.add_argument("--agent", default=None, help="only this agent id (default: every agent that answers)")
     p.add_argument(
