@@ -410,7 +410,8 @@ class AgentDaemon:
             emb = codec.decode(Embedding, msg.payload)
         except ProtocolError:
             return  # not ours to judge: watchers report bad embeddings
-        if emb.world_id == keys.last_chunk(msg.key):
+        if emb.world_id == keys.last_chunk(msg.key) and emb.version <= MAX_VERSION:
+            # (a version with no room for the next one on the wire cannot be followed: not taken)
             self.store.published(emb.world_id, emb.version)
 
     def _answer_checkpoint(self, key: str, payload: bytes | None) -> bytes:

@@ -232,3 +232,15 @@ def test_status_flags_an_id_answered_by_two_processes(endpoint) -> None:
         assert "agent id 'a0' is answered by 2 processes" in out.stdout
         got = json.loads(_sme_status(endpoint, "--json").stdout)
         assert got["duplicates"] == {"a0": 2}
+
+
+def test_an_embedding_version_with_no_room_for_the_next_is_not_followed() -> None:
+    """A version heard on the bus that a link would number after (last_published) must leave room
+    for the next one: 2^32-1 from a hostile publisher would make every later publish fail."""
+    from sensorimotor.protocol.bus import BusMessage
+
+    d = AgentDaemon(bus=None)  # type: ignore[arg-type]
+    for version in (7, limits.EMBEDDING_VERSION_MAX):
+        emb = Embedding("x", "g1", version, "initial", (), np.zeros((0, 2)), (), None)
+        d._on_embedding(BusMessage(keys.agent_embedding("x", "g1"), codec.encode(emb), ""))
+    assert d.store.last_published("g1") == 7
