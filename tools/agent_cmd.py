@@ -245,6 +245,22 @@ def run_agent(args: argparse.Namespace) -> int:
     guard = ExitGuard(who, WORKER_EXIT_GRACE if args.parent_pid is not None else AGENT_EXIT_GRACE, args.parent_pid)
     if args.parent_pid is not None:
         guard.start()
+    try:
+        return _run_agent(args, guard, who, owner_id, workers, program_params)
+    finally:
+        if args.parent_pid is None:  # in-process callers get their wakeup fd back; a worker stays guarded
+            guard.close()  # to its last instruction (interpreter shutdown with a session whose router is gone)
+
+
+def _run_agent(
+    args: argparse.Namespace,
+    guard: ExitGuard,
+    who: str,
+    owner_id: str,
+    workers: int,
+    program_params: dict[str, dict[str, Any]],
+) -> int:
+    """`run_agent` once its arguments are checked: the bus, the daemon and its workers."""
     cfg = bus_config_from_args(args, "agent")
     endpoint = _worker_endpoint(cfg.listen) if cfg.mode == "router" else None
     if workers > 1 and endpoint is None:

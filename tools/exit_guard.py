@@ -49,7 +49,10 @@ class ExitGuard:
         self.last_words: Callable[[], object] = lambda: None
         self.last_words_timeout = 0.5
         self._rfd: int | None = None
+        self._wfd: int | None = None
+        self._old_wakeup_fd = -1
         self._fired = threading.Event()
+        self._closed = threading.Event()
 
     def start(self) -> None:
         """Start watching the parent (if any); call `watch_signals` too once signal handlers are set."""
@@ -60,15 +63,27 @@ class ExitGuard:
         handlers for SIGINT/SIGTERM are installed: only signals with a Python handler write the fd)."""
         r, w = os.pipe()
         os.set_blocking(w, False)
-        signal.set_wakeup_fd(w, warn_on_full_buffer=False)
-        self._rfd = r
+        self._old_wakeup_fd = signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+        self._rfd, self._wfd = r, w
+
+    def close(self) -> None:
+        """Stop watching (the process stopped cleanly; a deadline already running still ends it):
+        the previous wakeup fd is put back (main thread only)."""
+        self._closed.set()
+        if self._wfd is not None:
+            signal.set_wakeup_fd(self._old_wakeup_fd)
+            os.close(self._wfd)
+            self._wfd = None
 
     def _watch(self) -> None:
-        while not self._fired.is_set():
+        while not self._fired.is_set() and not self._closed.is_set():
             rfd = self._rfd
             if rfd is not None:
-                ready, _, _ = select.select([rfd], [], [], POLL)
-                if ready:
+                try:
+                    ready, _, _ = select.select([rfd], [], [], POLL)
+                except (OSError, ValueError):  # closed meanwhile
+                    return
+                if ready and not self._closed.is_set():
                     signums = os.read(rfd, 64)
                     names = ", ".join(signal.Signals(n).name for n in signums if n in signal.Signals._value2member_map_)
                     self.fire(f"{names or 'a signal'} received")
