@@ -194,3 +194,41 @@ def test_the_exit_guard_ends_a_process_whose_stop_hangs(tmp_path, mode) -> None:
         if p.poll() is None:
             p.kill()
             p.wait()
+
+
+PARENT = """
+import os, subprocess, sys
+argv = [sys.executable, "-m", "sensorimotor.tools.cli", "agent", "--id", "a0", "--owner-id", "a0.w1"]
+argv += ["--workers", "1", "--parent-pid", str(os.getpid()), "--mode", "client", "--connect", sys.argv[1]]
+p = subprocess.Popen(argv)
+print(p.pid, flush=True)
+p.wait()
+"""
+
+
+@pytest.mark.integration
+def test_a_worker_still_connecting_is_gone_within_5_s_of_its_agents_kill_9() -> None:
+    """A router that accepts the connection and never answers (frozen): the worker's session is
+    still opening when its agent dies."""
+    import socket
+
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(16)
+        ep = f"tcp/127.0.0.1:{silent.getsockname()[1]}"
+        parent = subprocess.Popen([sys.executable, "-c", PARENT, ep], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+        worker = None
+        try:
+            assert parent.stdout is not None
+            worker = int(parent.stdout.readline())
+            time.sleep(3.0)  # the worker has imported everything and is opening its session
+            assert _running(worker), "the worker gave up connecting by itself: nothing to test"
+            parent.kill()
+            parent.wait(10)
+            assert wait_for(lambda: not _running(worker), 5.0, every=0.1), "the worker outlived its agent"
+        finally:
+            if parent.poll() is None:
+                parent.kill()
+                parent.wait()
+            if worker is not None:
+                _kill([worker])
