@@ -189,10 +189,8 @@ class AgentDaemon:
         self._retry_spec: dict[str, float] = {}  # failed for no spec reply (transient?): tried again from then
         self._retried: set[str] = set()  # worlds tried again after no spec reply (their failure was counted)
         self._elsewhere: set[str] = set()  # worlds another owner claimed after this one (a hint: see _newer_elsewhere)
-        self._held: dict[str, tuple[int, float]] = {}  # world -> (lease epoch, time.time() granted) last held here
-        self._other: dict[
-            str, tuple[str, int, float]
-        ] = {}  # world -> (owner, epoch, when): latest lease seen elsewhere
+        self._held: dict[str, tuple[int, float]] = {}  # world -> (lease epoch, time granted) last held here
+        self._other: dict[str, tuple[str, int, float]] = {}  # world -> (owner, epoch, when) seen elsewhere
         self.workers = tuple(workers)
         self.all_obs = all_obs
         self._obs_subs: dict[str, list[Any]] = {}  # without all_obs: world -> its obs/truth/event subscribers
@@ -689,8 +687,8 @@ class AgentDaemon:
     def _note_lease_elsewhere(self, wid: str, owner: str, epoch: int, when: float) -> None:
         """Another owner held world `wid`'s lease at `epoch` at time `when` (a lease refusal or
         lease_lost naming it, a checkpoint it shared)."""
-        if not owner or owner == self.owner_id or epoch <= 0:
-            return
+        if not owner or owner == self.owner_id or epoch <= 0 or wid not in self.links:
+            return  # (only worlds with a link here: the others' worlds would pile up in memory)
         old = self._other.get(wid)
         if old is None or when > old[2]:
             self._other[wid] = (owner, epoch, when)
@@ -1078,8 +1076,7 @@ class AgentDaemon:
         if lease is None:
             return  # held by another live owner: the claim stays, own() asks again
         epoch = lease.epoch if lease.granted else 0
-        if epoch:
-            self._held[wid] = (epoch, time.time())
+        granted_at = time.time()
         try:
             truth = self._fetch(keys.world_truth(wid), Truth, tries=1)
         except (BusError, ProtocolError):
@@ -1128,6 +1125,8 @@ class AgentDaemon:
             att.link.version = floor
         self.links[wid] = att.link
         self._elsewhere.discard(wid)
+        if epoch:
+            self._held[wid] = (epoch, granted_at)
         if not self.all_obs and wid not in self._obs_subs:
             # only now: a claimed world that cannot be attached (a fake one) costs no subscriber
             # declarations, which every session on the bus would have to route; the lockstep world
