@@ -232,3 +232,36 @@ def test_a_worker_still_connecting_is_gone_within_5_s_of_its_agents_kill_9() -> 
                 parent.wait()
             if worker is not None:
                 _kill([worker])
+
+
+LIVELINESS = """
+import sys, threading
+from sensorimotor.protocol import keys
+from sensorimotor.protocol.bus import Bus, BusConfig
+from tests.conftest import wait_for
+ep = sys.argv[1]
+with Bus(BusConfig.for_role("agent", ep)) as r, Bus(BusConfig.for_role("tool", ep)) as decl:
+    with Bus(BusConfig.for_role("tool", ep)) as q:
+        for i in range(300):
+            decl.token(keys.alive_claim(f"w{i}", "zz"))
+        seen = set()
+        q.watch_alive(keys.ALL_CLAIMS, lambda k, alive: seen.add(k), history=True)
+        assert wait_for(lambda: len(seen) == 300, 20)
+        got = []
+        t = threading.Thread(target=lambda: got.append(len(q.alive(keys.ALL_CLAIMS, timeout=2.0))), daemon=True)
+        t.start()
+        t.join(15)
+        print(got[0] if got else "hung", flush=True)
+        import os
+        os._exit(0)  # (a hung session would not close)
+"""
+
+
+@pytest.mark.integration
+def test_a_liveliness_query_for_more_than_256_tokens_returns_on_a_session_that_watches_them(endpoint) -> None:
+    """zenoh's default reply channel holds 256 replies, and a session that watches the tokens gets
+    them delivered inside the query call: the 257th blocked it forever (the agent's audit)."""
+    out = subprocess.run(
+        [sys.executable, "-c", LIVELINESS, endpoint], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert out.stdout.strip() == "300", (out.stdout, out.stderr[-2000:])
