@@ -244,3 +244,29 @@ def test_an_embedding_version_with_no_room_for_the_next_is_not_followed() -> Non
         emb = Embedding("x", "g1", version, "initial", (), np.zeros((0, 2)), (), None)
         d._on_embedding(BusMessage(keys.agent_embedding("x", "g1"), codec.encode(emb), ""))
     assert d.store.last_published("g1") == 7
+
+
+@pytest.mark.integration
+def test_an_agent_given_a_checkpoint_beyond_the_wire_starts_fresh_publishes_and_answers(
+    procs, endpoint, tmp_path
+) -> None:
+    """The trial of the issue: a state dir whose checkpoint says embedding version 2^32+5 made every
+    publish fail and the agent vanish from `sme status`; now it is set aside and the world learns."""
+    from conftest import Lines, agent_status, wait_for, world_link
+
+    world, path = _saved_grid(tmp_path, version=2**32 + 5)
+    agent = procs.start("agent", "--listen", endpoint, "--workers", "1", "--state-dir", str(tmp_path))
+    logs = Lines(agent.stderr)
+    procs.start("world", "gridworld", "--id", world.world_id, "--connect", endpoint, "-q")
+
+    def learned():
+        ln = world_link(agent_status(endpoint), world.world_id)
+        return ln is not None and ln.embedding_version >= 1 and ln
+
+    ln = wait_for(learned, 90, every=0.5)
+    assert ln and ln.embedding_version < 100, ln
+    assert agent_status(endpoint).counters["bad_checkpoint"] == 1
+    out = _sme_status(endpoint)
+    assert out.returncode == 0 and f"{world.world_id}" in out.stdout, out
+    assert [f for f in os.listdir(tmp_path) if ".ckpt.npz.bad-" in f]
+    assert logs.has("set aside") and not logs.has("Traceback") and not logs.has("Value out of range"), logs.lines
