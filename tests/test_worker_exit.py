@@ -265,3 +265,22 @@ def test_a_liveliness_query_for_more_than_256_tokens_returns_on_a_session_that_w
         [sys.executable, "-c", LIVELINESS, endpoint], cwd=ROOT, capture_output=True, text=True, timeout=120
     )
     assert out.stdout.strip() == "300", (out.stdout, out.stderr[-2000:])
+
+
+@pytest.mark.integration
+def test_an_empty_liveliness_answer_is_no_evidence_that_every_token_is_gone(endpoint) -> None:
+    """zenoh sometimes answers a liveliness query with nothing on a session that watches the same
+    tokens; the daemon's audit must not unbook its worlds for that (here: every answer empty)."""
+    from sensorimotor.agent.daemon import AgentDaemon
+
+    with Bus(BusConfig.for_role("agent", endpoint)) as bus, Bus(BusConfig.for_role("tool", endpoint)) as other:
+        d = AgentDaemon(bus, agent_id="m")
+        d.start()
+        try:
+            other.token(keys.alive_world("g9"))
+            assert wait_for(lambda: "g9" in d.book.view().worlds, 10)
+            bus.alive = lambda key, timeout=1.0, complete=False: []  # type: ignore[method-assign]
+            time.sleep(8 * d.AUDIT_EVERY)  # well past the audit's patience (1.5 s)
+            assert "g9" in d.book.view().worlds and d.counters["liveliness_mended"] == 0, d.counters
+        finally:
+            d.stop()
