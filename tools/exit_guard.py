@@ -28,6 +28,17 @@ log = logging.getLogger("sme.agent")
 POLL = 0.2  # seconds between two looks at the parent
 
 
+def _names(signums: bytes) -> str:
+    """The signal numbers read from the wakeup fd, as names (``SIGTERM``)."""
+    out = []
+    for n in signums:
+        try:
+            out.append(signal.Signals(n).name)
+        except ValueError:
+            out.append(str(n))
+    return ", ".join(dict.fromkeys(out))
+
+
 class ExitGuard:
     """Watch for a stop request and end the process `grace` seconds after it (see the module doc).
 
@@ -85,8 +96,7 @@ class ExitGuard:
                     return
                 if ready and not self._closed.is_set():
                     signums = os.read(rfd, 64)
-                    names = ", ".join(signal.Signals(n).name for n in signums if n in signal.Signals._value2member_map_)
-                    self.fire(f"{names or 'a signal'} received")
+                    self.fire(f"{_names(signums) or 'a signal'} received")
                     return
             else:
                 time.sleep(POLL)
