@@ -30,6 +30,7 @@ PAGES = (
     "docs/reproduce.md",
     "docs/commands/bench.md",
     "docs/arm.md",
+    "docs/zoo.md",
 )
 
 
@@ -195,6 +196,44 @@ SOURCES: dict[str, Source] = {
         command_output,
     ),
     "bench-world-arm": Source("sme bench world --world arm", "results/bench-world-arm/output.txt", command_output),
+    "zoo-defaults": Source(
+        "sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world MiniGrid",
+        "results/bench-zoo-defaults/runs.jsonl",
+        jsonl_table(
+            (
+                ("world (`--world` names it)", "world"),
+                ("learner", "learner"),
+                ("final error", "final_error"),
+                ("best", "best_error"),
+                ("trustworthiness", "trustworthiness"),
+                ("goal reached", "goal_reached_fraction"),
+                ("optimal policy: goal", "optimal_goal_fraction"),
+                ("optimal policy: error", "optimal_error"),
+                ("steps to 1.5x final", "steps_to_1.5x_final"),
+                ("steps/s", "steps_per_second"),
+                ("PCA", "pca_error"),
+                ("Isomap", "isomap_error"),
+                ("worst after convergence", "worst_ratio"),
+                ("false alarms", "drops"),
+            ),
+            keep=lambda r: bool(r.get("summary")),
+        ),
+    ),
+    "zoo-defaults-short": Source(
+        "sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world MiniGrid",
+        "results/bench-zoo-defaults/runs.jsonl",
+        jsonl_table(
+            (
+                ("world", "world"),
+                ("learner", "learner"),
+                ("final error", "final_error"),
+                ("goal reached", "goal_reached_fraction"),
+                ("optimal policy's goal", "optimal_goal_fraction"),
+                ("optimal policy's error", "optimal_error"),
+            ),
+            keep=lambda r: bool(r.get("summary")),
+        ),
+    ),
 }
 SOURCES["detectors-quick"] = Source(
     "sme bench detectors --worlds gridworld,retina,vergence,mountaincar --quick --out FILE.md",

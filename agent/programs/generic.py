@@ -123,10 +123,8 @@ class GenericProgram(Program):
             raise SpecMismatch(f"generic program: world {spec.world_id} declares no sensors")
         self.actions = action_table(spec, prm.action_levels, prm.action_scale)
         #: the stochastic-world estimator and traces per start in force (`auto` and 0 resolved)
-        self.estimator = (
-            prm.estimator if prm.estimator != "auto" else "mean_trace" if spec.action_space.discrete else "mode"
-        )
-        mean_trace = self.estimator == "mean_trace"
+        self.estimator = prm.estimator if prm.estimator != "auto" or spec.action_space.discrete else "mode"
+        mean_trace = self.estimator in ("mean_trace", "auto")
         self.samples = prm.samples or (int(np.clip(768 // max(1, spec.n_starts), 8, 64)) if mean_trace else 8)
         self._motor_actions = action_table(spec, prm.action_levels, prm.motor_scale or prm.action_scale)
         self.n_actions = self.actions.shape[0]

@@ -32,6 +32,24 @@ def action_table(spec: WorldSpec, levels: int, scale: float = 1.0) -> np.ndarray
     return np.array(list(itertools.product(*grids)), dtype=np.float64)
 
 
+#: `estimator=auto`: the mode trace stands for a start when it is at least this share of its samples
+MODE_SHARE = 0.5
+
+
+def mode_share(traces: list[list[list[int]]]) -> float:
+    """The mean over starts of the share of a start's samples that are its most common trace: near 1
+    where the policy controls the world's chance (the mode trace is what the start does), low on
+    slippery ice (every sample another trace: their mean is the better summary)."""
+    shares = []
+    for per in traces:
+        if per:
+            counts: dict[tuple[int, ...], int] = {}
+            for t in per:
+                counts[tuple(t)] = counts.get(tuple(t), 0) + 1
+            shares.append(max(counts.values()) / len(per))
+    return float(np.mean(shares)) if shares else 1.0
+
+
 def embed_job(
     traces: list[list[list[int]]],
     actions: np.ndarray | None,
@@ -47,12 +65,16 @@ def embed_job(
     deterministic world): edit distance of discrete actions (in the start's frame when `rotations`,
     (order, [[action, power], ...]), says which actions turn: `frame_trace`); the padded sum or DTW
     of the action values when `actions` is the table of a discretised box. Several samples: the mode
-    trace, or the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
+    trace, or the mean pairwise distance (ch. 9.4), or the padded sum between mean traces; `auto`:
+    the mode trace where it is what a start mostly does (`mode_share`), else mean traces. A pure
+    function, run off the act path."""
     symbols = n_actions
     if rotations is not None and actions is None:
         rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
         traces = [[frame_trace(t, rot, n_actions) for t in s] for s in traces]
         symbols = n_actions * (1 + rot.order)  # the labels frame_trace gives
+    if estimator == "auto":
+        estimator = "mode" if actions is not None or mode_share(traces) >= MODE_SHARE else "mean_trace"
     if estimator == "plain":  # one sampled trace per start, as if the world were deterministic
         traces, reached = [s[:1] for s in traces], None if reached is None else [r[:1] for r in reached]
     if any(len(t) > 1 for t in traces) and estimator == "mean_trace" and actions is None:
@@ -99,4 +121,4 @@ def motor_job(
     }
 
 
-__all__ = ["action_table", "embed_job", "motor_job"]
+__all__ = ["MODE_SHARE", "action_table", "embed_job", "mode_share", "motor_job"]

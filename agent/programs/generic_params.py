@@ -135,8 +135,8 @@ class GenericProgramParams:
     samples: int = option(
         0,
         "traces per start state once the world is seen to be stochastic (every estimator: the goal fraction "
-        "that ranks and watches policies is estimated from all of them); 0: for the mean_trace estimator "
-        "768 traces a sweep, 8 to 64 per start (a mean trace's noise falls with its samples), else 8",
+        "that ranks and watches policies is estimated from all of them); 0: for the mean_trace and auto "
+        "estimators 768 traces a sweep, 8 to 64 per start (a mean trace's noise falls with its samples), else 8",
         min=0,
         max=100,
     )
@@ -145,8 +145,9 @@ class GenericProgramParams:
         "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4), mean_trace (the padded sum "
         "between the starts' mean traces, a distance between trace distributions), or plain (the first "
         "sampled trace of each start, as in a deterministic world: the figure the estimators are "
-        "compared with); auto: mean_trace for discrete actions (the best map of the slippery lake, "
-        "docs/zoo.md), mode for box actions",
+        "compared with); auto, discrete actions: at each sweep, the mode trace where it is at least half of "
+        "a start's samples on average (the policy controls the world's chance), else mean_trace (slippery "
+        "ice: every sample another trace); box actions: mode",
         choices=("auto", "mode", "mean", "mean_trace", "plain"),
     )
     stochastic_gamma: float = option(
