@@ -125,3 +125,16 @@ def world_link(st: Any, wid: str) -> Any:
     if st is None:
         return None
     return next((ln for ln in st.links if ln.world_id == wid), None)
+
+
+def install_entry_point(tmp_path: Path, monkeypatch: Any, dist: str, group: str, line: str) -> None:
+    """Make `tmp_path` an installed distribution `dist` (a .dist-info beside its modules) declaring
+    `line` (``name = module:Class``) in entry-point group `group`, on sys.path for this test."""
+    import importlib
+
+    info = tmp_path / f"{dist.replace('-', '_')}-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(f"[{group}]\n{line}\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.invalidate_caches()

@@ -10,6 +10,7 @@ from sensorimotor.agent.learners.tabular_model import TabularModel, plan_tabular
 from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.registry import make_world
+from tests.conftest import install_entry_point
 
 
 def _chain(n: int) -> TabularModel:
@@ -185,7 +186,6 @@ def test_a_learner_from_an_installed_package_is_chosen_by_name(tmp_path, monkeyp
     """A table learner that a package declares in the `sensorimotor.learners` entry-point group is
     chosen with `generic.learner=NAME` and learns the gridworld; an unknown name is refused with
     the valid ones."""
-    import importlib
     import sys
     from dataclasses import replace
 
@@ -197,12 +197,9 @@ def test_a_learner_from_an_installed_package_is_chosen_by_name(tmp_path, monkeyp
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
     (pkg / "q.py").write_text(LEARNER_PACKAGE)
-    dist = tmp_path / "my_learners-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: my-learners\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text("[sensorimotor.learners]\noptimistic-q = my_learners.q:OptimisticQ\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    importlib.invalidate_caches()
+    install_entry_point(
+        tmp_path, monkeypatch, "my-learners", "sensorimotor.learners", "optimistic-q = my_learners.q:OptimisticQ"
+    )
     try:
         assert check_program_params({"generic": {"learner": "optimistic-q"}}) == {
             "generic": {"learner": "optimistic-q"}

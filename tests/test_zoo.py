@@ -23,6 +23,7 @@ from sensorimotor.tools.experiments.repeatable import check
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.gym_world import EmbeddableEnv
 from sensorimotor.worlds.registry import make_world
+from tests.conftest import install_entry_point
 from tests.spot_env import SPOT_STARTS, Spot
 
 
@@ -225,12 +226,7 @@ def test_a_world_subclass_is_served_by_path_and_by_entry_point(tmp_path, monkeyp
             '''
         )
     )
-    dist = tmp_path / "my_worlds-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: my-worlds\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text("[sensorimotor.worlds]\nmy-line = my_worlds.line:LineWorld\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    importlib.invalidate_caches()
+    install_entry_point(tmp_path, monkeypatch, "my-worlds", "sensorimotor.worlds", "my-line = my_worlds.line:LineWorld")
     for name in ("my_worlds.line:LineWorld", "my-line"):
         with make_world(name, None, 0) as w:
             assert w.world_id == "my-line"
