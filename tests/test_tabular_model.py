@@ -244,3 +244,15 @@ def test_a_near_deterministic_lake_is_embedded_from_its_mode_traces():
         run = run_inprocess(w, program, 12_000, stop_when=lambda r: bool(r.embeddings))
     assert program.stochastic and program.estimator == "auto"
     assert run.embeddings and run.embeddings[0].procrustes_error < 0.15, run.errors
+
+
+def test_walls_make_a_map_of_ways_not_of_places():
+    """tools/experiments/geodesic_ceiling: in an open room the shortest ways are the places (MDS of
+    them is near the cells); round LavaGap's wall they are not."""
+    pytest.importorskip("minigrid")
+    from sensorimotor.tools.experiments.geodesic_ceiling import geodesic_error
+
+    with make_world("gym:MiniGrid-Empty-8x8-v0", None, 0, {}) as w:
+        assert geodesic_error(w) < 0.05
+    with make_world("gym:MiniGrid-LavaGapS7-v0", None, 0, {}) as w:
+        assert geodesic_error(w) > 0.15
