@@ -315,6 +315,34 @@ def _guard(callback: Callable[[BusMessage], None], what: str) -> Callable[[Any],
     return run
 
 
+COLLECT_GRACE = 5.0  # seconds a query may outlast its own timeout before its replies are taken as they are
+
+
+def _collect(start: Callable[[Any], Any], timeout: float) -> list[Any]:
+    """The replies of a zenoh query started by `start(handler)`, gathered by a callback.
+
+    Not zenoh's default handler: that is a FIFO of 256 replies which the caller drains only once the
+    query call has returned, and a session answers the part of a query it can from its own tables
+    (a router: every liveliness token it knows; any session: its own tokens) inside that call, with
+    its state locked. With more than 256 such replies the call waited forever for room, every
+    other use of the session (puts included) waited for the lock, and the process stopped
+    answering (issue 41: `sme bench fuzz` declares ~800 fake worlds). The callback only appends,
+    on a thread of its own (indirect), so it never holds the session up; its `drop` says the query
+    is over (all replies in, or `timeout` passed).
+    """
+    got: list[Any] = []
+    done = threading.Event()
+    start(zenoh.handlers.Callback(got.append, done.set))
+    if not done.wait(timeout + COLLECT_GRACE):
+        log.warning(
+            "a query was not over %.1f s after its %.1f s timeout; using its %d replies",
+            COLLECT_GRACE,
+            timeout,
+            len(got),
+        )
+    return list(got)
+
+
 class Inbox:
     """A bounded queue filled by a subscriber: when full, the oldest message is dropped and counted."""
 
@@ -689,12 +717,12 @@ class Bus:
         list of str
         """
         out = []
-        for r in self._session.liveliness().get(key, timeout=timeout):
+        for r in _collect(lambda handler: self._session.liveliness().get(key, handler, timeout=timeout), timeout):
             if r.ok is not None:
                 out.append(str(r.ok.key_expr))
             elif complete:
                 raise BusError(f"liveliness query {key}: a route answered with an error")
-        return out
+        return list(dict.fromkeys(out))  # a client's own tokens are answered by itself and by its router
 
     def undeclare(self, entity: Any) -> None:
         """Undeclare a publisher (a `Publisher` or the zenoh one), subscriber, queryable or token made
