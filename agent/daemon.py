@@ -1168,8 +1168,10 @@ class AgentDaemon:
         as gone); a world's missed event also goes to the main loop, as zenoh's would have."""
         audit = TokenAudit()
         exprs = (keys.ALL_ALIVE_WORLDS, keys.ALL_ALIVE_OWNERS, keys.ALL_CLAIMS)
+        steps: dict[str, int] = {}
         while not self._stop.wait(self.AUDIT_EVERY):
             held = self.book.tokens()  # before the queries: an event meanwhile shows as touched
+            sure = self._surely_alive(steps)
             for expr in exprs:
                 booked = held[expr]
                 try:
@@ -1177,13 +1179,51 @@ class AgentDaemon:
                 except Exception as e:  # noqa: BLE001 - a closing session or a route's error: next time
                     log.debug("liveliness audit of %s skipped: %s", expr, e)
                     continue
+                # under load an answer can lack replies (issue 41: hundreds of fake worlds mended as gone
+                # and back, a healthy world paused): one that lacks a token surely alive is not used
+                lacking = sure[expr] - set(alive)
+                if expr == keys.ALL_CLAIMS:
+                    lacking &= self._own_claims()  # not withdrawn while the query ran
+                if lacking:
+                    log.debug("liveliness audit of %s skipped: the answer lacks %d live tokens", expr, len(lacking))
+                    continue
                 for key, is_alive, since in audit.check(expr, booked, alive, time.monotonic(), self.book.touched):
+                    if not is_alive and self._answers_alive(key):
+                        continue  # absent from the list, present when asked alone: a lost reply
                     if not self.book.mend(expr, key, is_alive, since):
                         continue
                     self.counters["liveliness_mended"] += 1
                     log.info("liveliness token %s is %s, but zenoh never said so", key, "alive" if is_alive else "gone")
                     if expr == keys.ALL_ALIVE_WORLDS:
                         self._changes.put((keys.last_chunk(key), is_alive))
+
+    def _surely_alive(self, steps: dict[str, int]) -> dict[str, set[str]]:
+        """Tokens a complete liveliness answer lists, per audited expression: this owner's own token
+        and claims, and the worlds whose links here answered an observation since the last call
+        (`steps`: each link's steps then, updated)."""
+        worlds = set()
+        for wid, link in list(self.links.items()):
+            n = link.counters.steps
+            if link.state == "attached" and steps.get(wid, n) != n:
+                worlds.add(keys.alive_world(wid))
+            steps[wid] = n
+        return {
+            keys.ALL_ALIVE_WORLDS: worlds,
+            keys.ALL_ALIVE_OWNERS: {keys.alive_owner(self.owner_id)},
+            keys.ALL_CLAIMS: self._own_claims(),
+        }
+
+    def _own_claims(self) -> set[str]:
+        """This owner's claim tokens declared at least a second ago (the bus has them all by then)."""
+        now = time.monotonic()
+        return {keys.alive_claim(w, self.owner_id) for w, (_, t) in list(self._claims.items()) if now - t >= 1.0}
+
+    def _answers_alive(self, key: str) -> bool:
+        """Whether a liveliness query for token `key` alone finds it (True when in doubt)."""
+        try:
+            return bool(self.bus.alive(key, timeout=1.0, complete=True))
+        except Exception:  # noqa: BLE001 - a closing session or a route's error
+            return True
 
     TICK = 0.1  # seconds between two ownership ticks when no world appeared or vanished
     MIN_TICK = 0.02  # when some did or the last tick claimed one: at most one per MIN_TICK (a tick is O(worlds))

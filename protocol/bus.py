@@ -318,7 +318,7 @@ def _guard(callback: Callable[[BusMessage], None], what: str) -> Callable[[Any],
 COLLECT_GRACE = 5.0  # seconds a query may outlast its own timeout before its replies are taken as they are
 
 
-def _collect(start: Callable[[Any], Any], timeout: float) -> list[Any]:
+def _collect(start: Callable[[Any], Any], timeout: float) -> tuple[list[Any], bool]:
     """The replies of a zenoh query started by `start(handler)`, gathered by a callback.
 
     Not zenoh's default handler: that is a FIFO of 256 replies which the caller drains only once the
@@ -328,19 +328,22 @@ def _collect(start: Callable[[Any], Any], timeout: float) -> list[Any]:
     other use of the session (puts included) waited for the lock, and the process stopped
     answering (issue 41: `sme bench fuzz` declares ~800 fake worlds). The callback only appends,
     on a thread of its own (indirect), so it never holds the session up; its `drop` says the query
-    is over (all replies in, or `timeout` passed).
+    is over (all replies in, or `timeout` passed). Returns the replies and whether the query ended
+    before its timeout (else replies may be missing).
     """
     got: list[Any] = []
     done = threading.Event()
+    t0 = time.monotonic()
     start(zenoh.handlers.Callback(got.append, done.set))
-    if not done.wait(timeout + COLLECT_GRACE):
+    over = done.wait(timeout + COLLECT_GRACE)
+    if not over:
         log.warning(
             "a query was not over %.1f s after its %.1f s timeout; using its %d replies",
             COLLECT_GRACE,
             timeout,
             len(got),
         )
-    return list(got)
+    return list(got), over and time.monotonic() - t0 < timeout * 0.95
 
 
 class Inbox:
@@ -709,15 +712,20 @@ class Bus:
         timeout : float, default=1.0
             Seconds to wait for the answer.
         complete : bool, default=False
-            Raise BusError when some route answered with an error (the list may then lack tokens)
-            instead of returning what the others answered.
+            Raise BusError when some route answered with an error or the query ran out of time (the
+            list may then lack tokens) instead of returning what came. Even a complete answer can
+            lack a token under load (a reply lost on its way): a token's absence is weaker evidence
+            than its presence.
 
         Returns
         -------
         list of str
         """
         out = []
-        for r in _collect(lambda handler: self._session.liveliness().get(key, handler, timeout=timeout), timeout):
+        replies, in_time = _collect(lambda h: self._session.liveliness().get(key, h, timeout=timeout), timeout)
+        if complete and not in_time:
+            raise BusError(f"liveliness query {key}: no end of the answer within {timeout:g} s")
+        for r in replies:
             if r.ok is not None:
                 out.append(str(r.ok.key_expr))
             elif complete:
