@@ -101,3 +101,56 @@ def test_the_daemon_audits_and_answers_beside_hundreds_of_worlds_it_does_not_own
         endpoint,
     )
     assert out == {"booked": True, "mended": True, "ghost": False, "status": ["m", 0, 0]}
+
+
+class _LossyBus:
+    """A bus whose liveliness answers to the audited expressions lose replies (as zenoh's did under
+    load), while a query for one token alone finds it."""
+
+    def __init__(self, alive: set[str], answers: dict[str, list[str]]) -> None:
+        self.alive_tokens, self.answers = alive, answers
+        self.calls: list[float] = []
+        self.closed = False
+
+    def alive(self, key: str, timeout: float = 1.0, complete: bool = False) -> list[str]:
+        import time
+
+        self.calls.append(time.monotonic())
+        if key in self.answers:
+            return list(self.answers[key])
+        return [key] if key in self.alive_tokens else []
+
+
+def test_the_audit_does_not_book_as_gone_what_a_lossy_answer_left_out():
+    import threading
+    import time
+
+    from sensorimotor.agent.daemon import AgentDaemon
+    from sensorimotor.protocol import keys
+    from tests.conftest import wait_for
+
+    w1, c_mine, c_other = keys.alive_world("w1"), keys.alive_claim("w1", "m"), keys.alive_claim("w2", "a1")
+    bus = _LossyBus(
+        alive={w1, c_other},  # w1 and a1's claim of w2 are alive; the audited answers lose them
+        answers={keys.ALL_ALIVE_WORLDS: [], keys.ALL_ALIVE_OWNERS: [keys.alive_owner("m")], keys.ALL_CLAIMS: []},
+    )
+    d = AgentDaemon(bus, agent_id="m")  # type: ignore[arg-type]
+    d.AUDIT_EVERY = 0.05
+    d._claims["w1"] = (None, time.monotonic() - 5.0)  # this owner's own claim, held for 5 s
+    d.book.owner("m", True)
+    d.book.world("w1", True)
+    d.book.claim(c_other, True)
+    d.book.claim(c_mine, True)
+    d.book.world("ghost", True)  # booked, but nowhere on the bus: this one is mended
+    t0 = time.monotonic()
+    th = threading.Thread(target=d._audit_liveliness, daemon=True)
+    th.start()
+    try:
+        assert wait_for(lambda: bus.calls and bus.calls[-1] - t0 > 3.0, 20)  # twice the audit's patience
+    finally:
+        d.stop()
+        th.join(5)
+    view = d.book.view()
+    assert "w1" in view.worlds  # left out of the answer, found when asked alone: not gone
+    assert view.claimants("w2") == {"a1"}  # that answer lacked this owner's own claim: not used
+    assert "ghost" not in view.worlds and d.counters["liveliness_mended"] == 1
