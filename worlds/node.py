@@ -229,6 +229,21 @@ class WorldNode:
         except ProtocolError as e:
             self._reject(e.kind, str(e))
             return
+        if ctl.world_id != self.world_id:  # meant for another world: applying it here would change the wrong body
+            why = f"control for world {clip(ctl.world_id, 64)!r} arrived on {self.world_id!r}'s key: not applied"
+            self._reject("spec_mismatch", why)
+            self._world_event(
+                WorldEvent(
+                    self.world_id,
+                    WorldEventKind.CONTROL_REFUSED,
+                    clip(ctl.kind, 64),
+                    why,
+                    session=self.session,
+                    timestamp=time.time(),
+                    control_id=ctl.id,
+                )
+            )
+            return
         with self._ctl_lock:
             self._controls.append(ctl)
 
