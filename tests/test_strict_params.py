@@ -279,3 +279,11 @@ def test_controls_at_and_beyond_the_limits_are_applied_or_refused_never_more(wid
     else:
         assert events[0].kind == "control_refused"
         assert sum(node.stats.rejected.values()) == 1
+
+
+def test_a_repeated_program_param_is_refused():
+    from sensorimotor.tools.agent_cmd import parse_program_params
+
+    assert parse_program_params(["gridworld.gamma=0.9"])["gridworld"]["gamma"] == 0.9
+    with pytest.raises(ParamError, match="'gridworld.gamma' is given twice"):
+        parse_program_params(["gridworld.gamma=0.9", "gridworld.gamma=0.8"])
