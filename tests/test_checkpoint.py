@@ -135,7 +135,9 @@ CASES = {
     "gridworld": (grid, None, {"samples_per_iteration": 200}, 1500, 1500, 1),
     # the generic program on raw sensor vectors (PCA + RBF) and on state ids (tabular)
     "generic": (beacons, None, {"samples_per_iteration": 150}, 1200, 1200, 1),
-    "generic-ids": (grid, "generic", {"samples_per_iteration": 200}, 1500, 1500, 1),
+    "generic-ids": (grid, "generic", {"samples_per_iteration": 200, "learner": "tabular"}, 1500, 1500, 1),
+    # the model learner, saved while it explores (its counts, plan in flight and way to the untried)
+    "generic-model": (grid, "generic", {"samples_per_iteration": 200}, 300, 1500, 1),
     "retina": (retina, None, {"embed_every": 200}, 700, 500, 1),
     "vergence": (vergence, None, {"samples_per_iteration": 100}, 1500, 1500, 1),
     # reaches the driving stage (Sarsa, Kalman filter) before the checkpoint; episodes end, are

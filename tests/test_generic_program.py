@@ -77,8 +77,10 @@ def test_generic_program_embeds_a_world_it_has_never_seen():
     assert isinstance(program, GenericProgram) and not program.tabular
     run = run_inprocess(world, program, 5_000)
     errors = [e for e in run.errors if e is not None]
-    assert len(errors) >= 6, run.outputs  # worse policies than the accepted one are not published
-    assert errors[0] > 0.3 and max(errors[-5:]) < 0.05, errors  # the map improves as the policy does
+    assert len(errors) >= 4, run.outputs  # worse policies than the accepted one are not published
+    assert errors[0] > 0.3 and errors[-1] < 0.05, errors  # the map improves as the policy does
+    # a sweep that repeats the accepted policy's traces is no new map: no version repeats the one before
+    assert all(a != b for a, b in zip(errors, errors[1:], strict=False)), errors
 
 
 def test_generic_program_on_state_ids_matches_the_gridworld_program():
@@ -123,7 +125,7 @@ def test_generic_program_detects_reversed_moves_and_relearns():
     i = [e.trigger for e in run.embeddings].index(Trigger.RELEARNED)
     relearned = run.embeddings[i]
     assert relearned.drop_step == drops[0].step and run.events(EventKind.RELEARNED)
-    assert relearned.procrustes_error < 0.1 and max(run.errors[i + 1 :]) < 0.05, run.errors
+    assert relearned.procrustes_error < 0.1 and max(run.errors[i + 1 :], default=0.0) < 0.05, run.errors
 
 
 class Jittery(Beacons):
@@ -163,15 +165,16 @@ def _jitter_run(doubt: bool):
         detector=make_detector("cusum", **program.detector_params),
         perturb=lambda k: Control("b", "jitter") if k == 3_000 else None,
     )
-    return world, run
+    return world, run, program
 
 
 def test_a_goal_missed_once_is_run_again_before_it_counts_as_a_drop():
-    world, run = _jitter_run(doubt=True)
+    world, run, program = _jitter_run(doubt=True)
     assert len(world.failed) == world.n**2  # every start had its one stuck episode
     assert not run.events(EventKind.DROP_DETECTED)
     late = [e for e in run.embeddings if e.step > 3_000]
-    assert max(e.metrics["retried_traces"] for e in late) >= 1, [e.metrics for e in late]
+    # the sweeps that ran a start again repeat the accepted traces: they publish no new map
+    assert program.retried_total >= 1
     assert all(e.metrics["goal_reached_fraction"] == 1.0 for e in late)
-    _, blind = _jitter_run(doubt=False)  # without the second run the same world reads as a drop
+    _, blind, _ = _jitter_run(doubt=False)  # without the second run the same world reads as a drop
     assert blind.events(EventKind.DROP_DETECTED)

@@ -220,7 +220,8 @@ def _sme(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
 @pytest.mark.integration
 def test_sme_perturb_answers_with_the_worlds_words(procs, endpoint):
     """`sme perturb` waits for the world's answer to its request id: exit 0 with what the world
-    applied; exit 2, nothing sent, for what the world kind's declaration rules out."""
+    applied; exit 1, nothing sent, for what the world's advertised kinds or their declarations rule
+    out, naming the valid ones; a world of ours takes the generic kinds too."""
     procs.start("agent", "--listen", endpoint, "-q")
     procs.start(
         "world", "retina", "--id", "r8", "--connect", endpoint, "-q", "--param", "supersample=1",
@@ -232,12 +233,15 @@ def test_sme_perturb_answers_with_the_worlds_words(procs, endpoint):
     assert ok.returncode == 0, ok.stderr
     assert "world r8 applied noise" in ok.stdout and "sd 0.01" in ok.stdout, ok.stdout
     out = _sme("perturb", "lesion", "--world", "r8", "--param", "radius=-1", "--connect", endpoint)
-    assert out.returncode == 2 and "not sent" in out.stderr, (out.stdout, out.stderr)
+    assert out.returncode == 1 and "not sent" in out.stderr, (out.stdout, out.stderr)
     assert "radius" in out.stderr and "0.0..512.0" in out.stderr, out.stderr
     assert wait_for(lambda: link(status(endpoint), "g8") is not None, 30)
-    out = _sme("perturb", "reverse", "--world", "g8", "--connect", endpoint)
-    assert out.returncode == 2 and "gridworld has no perturbation 'reverse'" in out.stderr, out.stderr
+    out = _sme("perturb", "heal", "--world", "g8", "--connect", endpoint)
+    assert out.returncode == 1 and "gridworld has no perturbation 'heal'" in out.stderr, out.stderr
+    assert "valid: reverse, permute, gain, lesion, noise, delay, restore" in out.stderr, out.stderr
     assert "sent" not in out.stdout
+    out = _sme("perturb", "reverse", "--world", "g8", "--connect", endpoint)  # generic: applied
+    assert out.returncode == 0 and "world g8 applied reverse: swapped actions" in out.stdout, (out.stdout, out.stderr)
 
 
 @pytest.mark.integration
@@ -265,5 +269,7 @@ def test_sme_perturb_exits_1_when_the_world_refuses_or_does_not_answer(endpoint)
         assert out.returncode == 1, (out.stdout, out.stderr)
         assert "world x1 refused melt: too hot to melt" in out.stderr
         assert seen and seen[-1].id != 0
+        out = _sme("perturb", "--list", "--world", "x1", "--connect", endpoint)  # it advertises nothing
+        assert out.returncode == 0 and "does not say which perturbations it takes" in out.stdout, out
         out = _sme("perturb", "silence", "--world", "x1", "--timeout", "1", "--connect", endpoint)
         assert out.returncode == 1 and "did not answer within 1 s" in out.stderr, out.stderr

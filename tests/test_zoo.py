@@ -105,7 +105,7 @@ def test_dict_observations_lose_only_what_cannot_be_flattened():
         assert [s.name for s in spec.sensors] == ["direction", "image"] and spec.goal == "reward"
         assert spec.n_starts == 35 and w.truth().tensors["positions"].shape == (35, 2)
         program = make_program(spec, 0)
-        assert program.learner == "tabular" and program.keyed
+        assert program.learner == "model" and program.keyed
 
 
 def test_panda_reach_holds_its_target_and_starts_on_a_lattice_of_hand_positions():
@@ -248,7 +248,8 @@ def test_bench_zoo_quick_reports_every_figure(capsys):
     r = run_one(next(z for z in ZOO if z.label == "CliffWalking"), 0, 8_000)
     assert r["goal"] == "terminated" and r["final_error"] < 0.1 and r["goal_reached_fraction"] == 1.0
     assert r["trustworthiness"] > 0.9 and r["pca_error"] is not None and r["regressions"] == 0 and r["drops"] == 0
-    assert r["worst_ratio"] is not None and r["worst_ratio"] <= 1.5
+    # a sweep that repeats the accepted traces publishes nothing: after convergence there may be no version
+    assert r["embeddings"] >= 1 and (r["worst_ratio"] is None or r["worst_ratio"] <= 1.5)
 
 
 def test_bench_zoo_workers_give_the_same_figures_as_one_process(capsys, monkeypatch):
@@ -262,12 +263,12 @@ def test_bench_zoo_workers_give_the_same_figures_as_one_process(capsys, monkeypa
     for workers in (1, 2):
         assert zoo.main(seeds=2, quick=True, json_out=True, workers=workers) == 0
         lines = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
-        rows[workers] = [{k: v for k, v in r.items() if "seconds" not in k} for r in lines]
+        rows[workers] = [{k: v for k, v in r.items() if "second" not in k} for r in lines]
     assert len(rows[1]) == 3 and rows[1][0]["seed"] == 0 and rows[1][1]["seed"] == 1 and rows[1][2]["summary"]
     assert rows[1] == rows[2]
     assert zoo.main(quick=True, json_out=True, seed_list=[1]) == 0  # one seed alone: what it gives among others
     alone = [json.loads(x) for x in capsys.readouterr().out.splitlines()][0]
-    assert {k: v for k, v in alone.items() if "seconds" not in k} == rows[1][1]
+    assert {k: v for k, v in alone.items() if "second" not in k} == rows[1][1]
 
 
 @pytest.mark.skipif(importlib.util.find_spec("minigrid") is None, reason="minigrid is not installed")
@@ -289,7 +290,7 @@ def test_a_world_whose_sampled_traces_never_differ_goes_back_to_one_trace_per_st
     from sensorimotor.protocol.messages import EventKind
 
     with make_world("gym:CliffWalking-v1", None, 0) as w:
-        program = make_program(w.spec(), 0)
+        program = make_program(w.spec(), 0, learner="tabular", estimator="mode")  # the rule, on the LSPI table
         detector = make_detector("cusum", **program.detector_params)
 
         def alike(step: int, obs: object) -> None:  # as when distinct states look alike (MountainCar's floats)
@@ -306,7 +307,7 @@ def test_a_world_whose_sampled_traces_never_differ_goes_back_to_one_trace_per_st
 
 def test_slippery_frozenlake_is_embedded_from_mean_traces_of_a_long_horizon_policy():
     with make_world("gym:FrozenLake-v1", None, 2) as w:
-        program = make_program(w.spec(), 2, estimator="mean_trace", samples=64)
+        program = make_program(w.spec(), 2, estimator="mean_trace", samples=64, learner="tabular")  # LSPI's gamma
         run = run_inprocess(w, program, 40_000, stop_when=lambda r: bool(r.embeddings))
     assert program.stochastic and program.lspi.gamma == 0.99 and abs(program.lspi.tie_tolerance - 0.005) < 1e-3
     e = run.embeddings[0]
@@ -405,7 +406,9 @@ def _swept_detector_run(
     from sensorimotor.agent.detectors import make_detector
 
     with make_world("gym:FrozenLake-v1", None, seed, {"success_rate": success_rate}) as w:
-        p = make_program(w.spec(), seed, **program)
+        # the acceptance rules, on the LSPI table with the mode estimator (the model learner and the
+        # mean-trace estimator are the defaults: tests/test_tabular_model.py)
+        p = make_program(w.spec(), seed, **{"learner": "tabular", "estimator": "mode", **program})
         now, step = [0], w.step
 
         def maybe_reversed(action: np.ndarray, step=step):

@@ -223,6 +223,16 @@ class World(abc.ABC):
         """
         return check_perturbation(self.kind, self.Perturbations, control)
 
+    def own_perturbations(self) -> Mapping[str, type]:
+        """The kinds this world applies itself (default: `Perturbations`); served by our node, it
+        also takes the generic kinds of `worlds.body_changes`, and its own take precedence."""
+        return self.Perturbations
+
+    def opposite_actions(self) -> list[tuple[int, int]] | None:
+        """Pairs of discrete actions that undo each other (up/down...), for the generic ``reverse``;
+        None (the default): found from the spec's action names, else the mirrored index."""
+        return None
+
     def perturb(self, control: Control) -> str:
         """Apply a perturbation; return a one-line description of what changed. Refuse a bad one
         with a PerturbationError before changing anything (see `perturbation_params`)."""

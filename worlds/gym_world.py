@@ -24,11 +24,17 @@ Start states and truth come from the first of these that fits:
 * classic control whose ``unwrapped.state`` can be set (`STATE_GRIDS`): a `start_grid` x
   `start_grid` grid over two state variables, truth those variables scaled to 0..1;
 * MiniGrid: every free cell the agent can stand on (facing east, or in all four headings with
-  `headings=4`), truth the cell;
+  `headings=4`), truth the cell; the layout is the one the world's seed draws, at every reset
+  (LavaGap's gap, SimpleCrossing's walls), and a grid larger than the agent's view is served whole
+  (`view`);
 * panda-gym reach tasks: the target held at the middle of its range, start states a lattice of
   hand positions (`start_grid` per axis, at most 4) reached by inverse kinematics, truth the hand
   position;
 * anything else: no start states and no truth; the world says so, and is learned, not embedded.
+
+Body changes of the environment's own: ``sme_perturb(kind, params) -> str`` and
+``sme_perturbations`` on any layer (see `worlds.body_changes.hook`; `EmbeddableEnv` takes both);
+served by our node, the world also takes the generic changes of `worlds.body_changes`.
 
 Environment keyword arguments are `--param k=v` pairs, typed by the environment's constructor
 defaults (bool/int/float/str/tuple) or, without a default, read as the most specific of
@@ -51,9 +57,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sensorimotor.protocol.messages import ActionSpace, GoalRule, SensorSpec, Truth, WorldSpec
+from sensorimotor.protocol.messages import ActionSpace, Control, GoalRule, SensorSpec, Truth, WorldSpec
 from sensorimotor.protocol.params import ParamError, _scalar, option, parse, suggest, table_text, unknown_name
 from sensorimotor.worlds.base import StepResult, World
+from sensorimotor.worlds.body_changes import hook as perturb_hook
 from sensorimotor.worlds.quiet import stdout_to_stderr
 from sensorimotor.worlds.registry import GYM_PREFIX
 
@@ -89,6 +96,14 @@ class GymWorldParams:
         max=5.0,
     )
     hand_velocity: bool = option(False, "panda-gym: serve the hand's velocity too, beside its position")
+    view: str = option(
+        "auto",
+        "MiniGrid: what the agent sees - full (the whole grid, MiniGrid's own FullyObsWrapper: one "
+        "observation per cell and heading) or agent (its egocentric view ahead, which shows cells of a "
+        "room wider than the view alike, so the same observation and action lead to different places); "
+        "auto: full when the grid is wider or taller than the agent's view, else agent",
+        choices=("auto", "full", "agent"),
+    )
     headings: int = option(
         1,
         "MiniGrid: start headings per cell (1: every start faces east; 4: all four - each start's "
@@ -124,6 +139,17 @@ GOALS: dict[str, GoalRule] = {
     "CartPoleEnv": GoalRule.NONE,
     "PendulumEnv": GoalRule.NONE,
 }
+
+# opposite discrete actions (for the generic `reverse`), by the unwrapped environment's class name
+OPPOSITES: dict[str, list[tuple[int, int]]] = {
+    "FrozenLakeEnv": [(0, 2), (1, 3)],  # left/right, down/up
+    "CliffWalkingEnv": [(0, 2), (1, 3)],  # up/down, right/left
+    "TaxiEnv": [(0, 1), (2, 3), (4, 5)],  # south/north, east/west, pickup/dropoff
+    "MountainCarEnv": [(0, 2)],  # push left/right
+    "CartPoleEnv": [(0, 1)],
+    "AcrobotEnv": [(0, 2)],  # torque -1/+1
+}
+MINIGRID_OPPOSITES = [(0, 1), (3, 4)]  # turn left/right, pick up/drop
 
 # gym.make's own keyword arguments that a world must not pass through
 _RESERVED = {"render_mode", "max_episode_steps", "disable_env_checker", "autoreset", "apply_api_compatibility"}
@@ -285,9 +311,16 @@ class EmbeddableEnv(gym.Wrapper):
         ``[len(starts), d]`` true coordinates of the start states.
     goal : str or None, default=None
         A `GoalRule` token, when the family default does not fit.
+    perturb : callable or None, default=None
+        ``perturb(env, kind, params) -> str``: apply a body change of the environment's own and
+        say what changed (see `worlds.body_changes.hook`); raise ValueError to refuse it.
+    perturbations : mapping or None, default=None
+        The kinds `perturb` offers: kind -> parameter dataclass (`params` is then its parsed
+        instance) or a one-line description (`params` is then a dict of strings).
 
     An environment can offer the same by itself, with methods ``sme_start_states()``,
-    ``sme_reset_to(start)``, ``sme_truth()`` and an attribute ``sme_goal``, on any wrapper layer.
+    ``sme_reset_to(start)``, ``sme_truth()``, ``sme_perturb(kind, params)`` and attributes
+    ``sme_goal`` and ``sme_perturbations``, on any wrapper layer.
 
     Examples
     --------
@@ -305,6 +338,8 @@ class EmbeddableEnv(gym.Wrapper):
         reset_to: Callable[[gym.Env, Any], Any],
         truth: Any,
         goal: str | None = None,
+        perturb: Callable[[gym.Env, str, Any], str] | None = None,
+        perturbations: Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__(env)
         self._starts, self._reset_to = list(starts), reset_to
@@ -313,6 +348,17 @@ class EmbeddableEnv(gym.Wrapper):
             raise ValueError(f"truth must be [len(starts), d]; got {self._truth.shape} for {len(self._starts)} starts")
         if goal is not None:
             self.sme_goal = GoalRule(goal)
+        if (perturb is None) != (perturbations is None):
+            raise ValueError("perturb and perturbations go together: the hook and the kinds it offers")
+        if perturb is not None:
+            self.sme_perturbations = dict(perturbations or {})
+            self._perturb = perturb
+
+    def sme_perturb(self, kind: str, params: Any) -> str:
+        """Apply the environment's own body change `kind` (the `perturb` given)."""
+        if getattr(self, "_perturb", None) is None:
+            raise ValueError("this EmbeddableEnv was given no perturb hook")
+        return self._perturb(self.env, kind, params)
 
     def sme_start_states(self) -> list[Any]:
         return list(self._starts)
@@ -408,6 +454,11 @@ class GymWorld(World):
             raise ParamError(f"gym:{env_id} cannot be made here: {e}") from None
         self.kind = GYM_PREFIX + env_id
         self.u: Any = self.env.unwrapped
+        self._full_view: Any = None  # MiniGrid's FullyObsWrapper, when the whole grid is served
+        if type(self.u).__module__.startswith("minigrid") and self._wants_full_view():
+            from minigrid.wrappers import FullyObsWrapper
+
+            self.env = self._full_view = FullyObsWrapper(self.env)
         act = self.env.action_space
         if isinstance(act, spaces.Discrete):
             self._a0, self._na = int(act.start), int(act.n)
@@ -425,6 +476,7 @@ class GymWorld(World):
                 f"gym:{env_id} has a {type(act).__name__} action space ({act}); `sme world gym:` serves Discrete "
                 "actions and bounded one-dimensional Box actions (wrap the environment to change its actions)"
             )
+        self._perturb_fn, self._own_kinds = self._perturb_hook()
         self._first_reset = True
         self._starts: list[Any] = []
         self._truth: np.ndarray | None = None
@@ -437,6 +489,50 @@ class GymWorld(World):
         if not self._starts:
             log.warning("gym:%s: %s: no start states, no truth (learned, not embedded)", env_id, self.how)
         self.pos: Any = None
+
+    # the environment's own body changes --------------------------------------------------------
+    def _perturb_hook(self) -> tuple[Callable[[str, Any], Any] | None, dict[str, type]]:
+        """The first layer's ``sme_perturb`` and the kinds its ``sme_perturbations`` declares."""
+        for layer in _layers(self.env):
+            decl = getattr(layer, perturb_hook.DECLARED, None)
+            if decl is None:
+                continue
+            fn = getattr(layer, perturb_hook.HOOK, None)
+            try:
+                if not callable(fn):
+                    raise ValueError(
+                        f"{type(layer).__name__} declares {perturb_hook.DECLARED} but has no {perturb_hook.HOOK}"
+                    )
+                return fn, perturb_hook.declared(decl)
+            except ValueError as e:
+                self.env.close()
+                raise ParamError(f"gym:{self.env_id}: {e}") from None
+        for layer in _layers(self.env):
+            if callable(getattr(layer, perturb_hook.HOOK, None)) and not isinstance(layer, EmbeddableEnv):
+                self.env.close()
+                raise ParamError(
+                    f"gym:{self.env_id}: {type(layer).__name__} defines {perturb_hook.HOOK} but not "
+                    f"{perturb_hook.DECLARED} (kind -> parameter dataclass or a one-line description): "
+                    "declare the kinds it offers"
+                )
+        return None, {}
+
+    def opposite_actions(self) -> list[tuple[int, int]] | None:
+        """The environment's ``sme_opposites`` (pairs of actions), else its family's (`OPPOSITES`)."""
+        hooked = _hooked(self.env, "sme_opposites")
+        if hooked is not None:
+            return [(int(i), int(j)) for i, j in (hooked() if callable(hooked) else hooked)]
+        if type(self.u).__module__.startswith("minigrid"):
+            return list(MINIGRID_OPPOSITES)
+        return OPPOSITES.get(type(self.u).__name__)
+
+    def own_perturbations(self) -> dict[str, type]:
+        """The kinds the environment offers through its ``sme_perturb`` hook (none without one)."""
+        return dict(self._own_kinds)
+
+    def perturb(self, control: Control) -> str:
+        """Apply one of the environment's own kinds through its hook (refused with the valid kinds)."""
+        return perturb_hook.apply(self._perturb_fn, self._own_kinds, self.kind, control)
 
     # goal --------------------------------------------------------------------------------------
     def _goal_rule(self) -> GoalRule:
@@ -588,6 +684,14 @@ class GymWorld(World):
         self._set_start = lambda start: reset_to(start)
         return f"{len(self._starts)} start states from the environment's own hook"
 
+    def _wants_full_view(self) -> bool:
+        """MiniGrid: serve the whole grid (`view`; auto: when the grid is larger than the agent's view)."""
+        if self.params.view != "auto":
+            return self.params.view == "full"
+        u: Any = self.u
+        side = int(getattr(u, "agent_view_size", 7))
+        return max(int(getattr(u, "width", 0)), int(getattr(u, "height", 0))) > side
+
     def _minigrid_starts(self) -> str:
         u: Any = self.u
         cells = [
@@ -605,7 +709,8 @@ class GymWorld(World):
         def set_state(start: Any) -> Any:
             (x, y), d = start
             u.agent_pos, u.agent_dir = (int(x), int(y)), int(d)
-            return u.gen_obs()
+            obs = u.gen_obs()
+            return obs if self._full_view is None else self._full_view.observation(obs)
 
         self._set_start = set_state
         return (
@@ -775,7 +880,10 @@ class GymWorld(World):
         declared one when None and `random_starts`; the environment's own reset otherwise)."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
-        env_seed = seed if seed is not None else (self.seed if self._first_reset else None)
+        # a MiniGrid layout is drawn at reset (LavaGap's gap, SimpleCrossing's walls): every reset
+        # draws the seed's one, so the start states and their truth stay those of the served world
+        fixed = self._first_reset or self._family == "minigrid"
+        env_seed = seed if seed is not None else (self.seed if fixed else None)
         self._first_reset = False
         obs, _ = self.env.reset(seed=env_seed)
         n = len(self._starts)

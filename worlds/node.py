@@ -39,6 +39,7 @@ from sensorimotor.protocol.messages import (
     clip,
 )
 from sensorimotor.worlds.base import PerturbationError, World
+from sensorimotor.worlds.body_changes.layer import served
 from sensorimotor.worlds.lease import LeaseCounts, LeaseKeeper
 from sensorimotor.worlds.lockstep import Lockstep
 
@@ -108,7 +109,8 @@ class WorldNode:
     Parameters
     ----------
     world : World
-        The simulator to serve.
+        The simulator to serve; the node serves it through `body_changes.layer.BodyChanges`
+        (`self.body`), so it also takes the generic body changes, advertised in its spec.
     bus : Bus
         An open bus session (the node does not close it).
     world_id : str or None, default=None
@@ -159,6 +161,7 @@ class WorldNode:
         lease_ttl: float = 1.5,
     ) -> None:
         self.world = world
+        self.body = served(world)  # the layer the node steps, perturbs and asks for its spec
         self.bus = bus
         self.world_id = keys.check_id(world_id or world.world_id, "world id")
         self.resend = resend
@@ -185,7 +188,7 @@ class WorldNode:
         self._error: BaseException | None = None
         self._controls: list[Control] = []
         self._ctl_lock = threading.Lock()
-        self._spec = replace(world.spec(), world_id=self.world_id, session=self.session)
+        self._spec = replace(self.body.spec(), world_id=self.world_id, session=self.session)
         if external:
             hint = {**self._spec.params, "program_hint": self._spec.program}
             self._spec = replace(self._spec, program=EXTERNAL_PROGRAM, params=hint)
@@ -289,7 +292,7 @@ class WorldNode:
             todo, self._controls = self._controls, []
         for ctl in todo:
             try:
-                what = self.world.perturb(ctl)
+                what = self.body.perturb(ctl)
                 self.stats.controls += 1
                 log.info("world %s: %s", self.world_id, what)
                 self._world_event(
@@ -412,7 +415,7 @@ class WorldNode:
         self._pub = pub
         with self._cv:
             self._t0 = time.perf_counter()
-            lock = Lockstep(self.world, wid, self.session)
+            lock = Lockstep(self.body, wid, self.session)
             self._data = self._publish(lock)
             self._sent = self._put_at = time.perf_counter()
             self._lock_step = lock

@@ -10,9 +10,14 @@ arriving; a truncation is neither.
 
 The learner follows the observation (`learner=auto`; the attach event says which):
 
-* ``tabular`` - one integer sensor with few values is a state id (the gridworld of ch. 5); integer
+* ``model`` - one integer sensor with few values is a state id (the gridworld of ch. 5); integer
   sensors with at most `symbol_values` values each (a symbolic grid such as MiniGrid's) are
-  tabulated by distinct observation. LSPI over the table, random exploration.
+  tabulated by distinct observation. Over the table: a model counted from experience (where each
+  action led, how often it reached the goal) and value iteration on it, exploring by optimism about
+  actions not yet tried `model_known` times (`agent.learners.tabular_model`); a stochastic world's
+  probabilities are its counts. ``tabular`` is LSPI over the same table with random exploration
+  (ch. 5's recipe); the name of a table learner from an installed package (entry-point group
+  ``sensorimotor.learners``, `agent.learners.registry`) is driven the same way as ``model``.
 * ``sarsa`` - a continuous observation of at most `sarsa_max_dims` values: tile-coded Sarsa(lambda)
   with optimistic initial values (the classic mountain-car recipe, ch. 8's CMAC; hashed tiles above
   `memory`), which explores toward sparse goals by itself.
@@ -47,7 +52,7 @@ back to where they started) and compares traces in the frame of their start
 A world whose transitions are seen to be stochastic (the same observation and action led to
 different observations) is embedded from `samples` traces per start state with the ch. 9.4
 estimators (`estimator`: the mode trace or the mean pairwise distance) or the padded sum between
-mean traces (`mean_trace`); the embedding says so. The tabular learner there plans with discount
+mean traces (`mean_trace`, the default for discrete actions: `auto`); the embedding says so. The tabular learner there plans with discount
 `stochastic_gamma` over up to `stochastic_samples` samples. A sweep whose samples are one trace for
 every start takes the world back to one trace per start.
 
@@ -81,13 +86,17 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from sensorimotor.agent.embedding import classical_mds, procrustes_error, trace_distances
+from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
 from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
+from sensorimotor.agent.learners.base import TableLearner
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
 from sensorimotor.agent.learners.motor_map import MotorMap, fit_motor_map
+from sensorimotor.agent.learners.registry import outside_learners, table_learner_class
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from sensorimotor.agent.learners.tabular_model import TabularModel
+from sensorimotor.agent.programs.acceptance import Score, Verdict, compare, compare_ends, end_disparity, sweep_score
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.goal import failed, reached
 from sensorimotor.agent.programs.sweep import StartStateSweep
@@ -95,7 +104,9 @@ from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
 from sensorimotor.protocol.params import option, parse
 
-LEARNERS = ("auto", "tabular", "lspi", "sarsa", "planner")
+#: the learners the program drives itself; any table learner of `agent.learners.registry` too
+LEARNERS = ("auto", "model", "tabular", "lspi", "sarsa", "planner")
+OWN_LEARNERS = ("tabular", "lspi", "sarsa", "planner")
 
 
 @dataclass(frozen=True)
@@ -103,7 +114,10 @@ class GenericProgramParams:
     """Hyperparameters of the generic program (ch. 6 recipe)."""
 
     learner: str = option(
-        "auto", "auto (by the observation: see the module docstring), tabular, lspi or sarsa", choices=LEARNERS
+        "auto",
+        "auto (by the observation: see the module docstring), model (a counted model of a table, planned on), "
+        "tabular (LSPI over a table), lspi, sarsa or planner, or the name of a table learner an installed "
+        "package declares (entry-point group sensorimotor.learners)",
     )
     samples_per_iteration: int = option(500, "tabular/lspi: new random-action samples between policy iterations", min=1)
     lspi_iterations: int = option(8, "at most this many LSPI iterations after each exploration phase", min=1)
@@ -128,6 +142,22 @@ class GenericProgramParams:
         32, "integer sensors with at most this many values each are tabulated by distinct observation", min=2
     )
     table_size: int = option(2048, "distinct observations a table holds (later ones share its last row)", min=2)
+    model_gamma: float = option(
+        0.99,
+        "model learner: discount of the plan (the values are the discounted chance of reaching the goal: a long "
+        "horizon takes the safe way round in a stochastic world, and the shortest way in a deterministic one)",
+        min=0.5,
+        max=0.9999,
+    )
+    model_known: int = option(
+        30, "model learner, stochastic world: tries of an action before its counted outcomes are trusted", min=1
+    )
+    model_epsilon: float = option(
+        0.05, "model learner: random-action rate while exploring, once no action nearby is untried", min=0.0, max=1.0
+    )
+    model_every: int = option(
+        50, "model learner: transitions between plans while new actions become known (exploration)", min=1
+    )
     sarsa_max_dims: int = option(
         6, "learner=auto: continuous observations of at most this many values use Sarsa", min=1
     )
@@ -200,19 +230,21 @@ class GenericProgramParams:
         1.0, "distance=dtw: cost of each repeated step (keeps trace length in the distance)", min=0.0
     )
     samples: int = option(
-        8,
+        0,
         "traces per start state once the world is seen to be stochastic (every estimator: the goal fraction "
-        "that ranks and watches policies is estimated from all of them)",
-        min=2,
+        "that ranks and watches policies is estimated from all of them); 0: for the mean_trace estimator "
+        "768 traces a sweep, 8 to 64 per start (a mean trace's noise falls with its samples), else 8",
+        min=0,
         max=100,
     )
     estimator: str = option(
-        "mode",
+        "auto",
         "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4), mean_trace (the padded sum "
         "between the starts' mean traces, a distance between trace distributions), or plain (the first "
         "sampled trace of each start, as in a deterministic world: the figure the estimators are "
-        "compared with)",
-        choices=("mode", "mean", "mean_trace", "plain"),
+        "compared with); auto: mean_trace for discrete actions (the best map of the slippery lake, "
+        "docs/zoo.md), mode for box actions",
+        choices=("auto", "mode", "mean", "mean_trace", "plain"),
     )
     stochastic_gamma: float = option(
         0.99,
@@ -470,32 +502,6 @@ def motor_job(
     }
 
 
-def end_disparity(ends: dict[int, tuple[np.ndarray, np.ndarray]]) -> float | None:
-    """How far a sweep's traces disagree about where they go: the Procrustes disparity (0 to 1) of
-    each trace's displacement (its end less its start) against its start, in the coordinates the
-    planner plans in; None without three starts apart, 1 when every trace goes the same way. The net
-    move of a trace is its displacement over the body's gain, so a net-move map matches the starts
-    (up to that gain) as far as the traces end where their starts would have them: at one goal, or
-    where a similarity of the starts puts them. Policies that reach every goal can still disagree
-    (the goal is a region): this ranks them with no truth."""
-    if len(ends) < 3:
-        return None
-    s = np.array([v[0] for v in ends.values()], dtype=np.float64)
-    e = np.array([v[1] for v in ends.values()], dtype=np.float64)
-    if np.allclose(s, s[0]):
-        return None
-    if np.allclose(s - e, (s - e)[0]):
-        return 1.0
-    return procrustes_error(s, s - e)
-
-
-def _sweep_score(reached: list[bool], traces: list[list[int]]) -> tuple[float, float]:
-    """How good a sweep's policy is, without truth: the fraction of starts that reach the goal, and
-    the mean length of the traces that do (shorter is better: every learner learns shortest paths)."""
-    ok = [len(t) for t, r in zip(traces, reached, strict=True) if r]
-    return (len(ok) / max(1, len(traces)), float(np.mean(ok)) if ok else float("inf"))
-
-
 class GenericProgram(Program):
     """Learns any world that declares start states: see the module docstring."""
 
@@ -515,6 +521,12 @@ class GenericProgram(Program):
         if not spec.sensors:
             raise SpecMismatch(f"generic program: world {spec.world_id} declares no sensors")
         self.actions = _action_table(spec, prm.action_levels, prm.action_scale)
+        #: the stochastic-world estimator and traces per start in force (`auto` and 0 resolved)
+        self.estimator = (
+            prm.estimator if prm.estimator != "auto" else "mean_trace" if spec.action_space.discrete else "mode"
+        )
+        mean_trace = self.estimator == "mean_trace"
+        self.samples = prm.samples or (int(np.clip(768 // max(1, spec.n_starts), 8, 64)) if mean_trace else 8)
         self._motor_actions = _action_table(spec, prm.action_levels, prm.motor_scale or prm.action_scale)
         self.n_actions = self.actions.shape[0]
         self.discrete = spec.action_space.discrete
@@ -535,7 +547,7 @@ class GenericProgram(Program):
         learner = prm.learner
         if learner == "auto":
             learner = (
-                "tabular"
+                "model"
                 if ids or symbols
                 else "planner"
                 if box and (d <= prm.planner_max_dims or frames)
@@ -543,8 +555,17 @@ class GenericProgram(Program):
                 if d <= prm.sarsa_max_dims
                 else "lspi"
             )
+        table_class = None if learner in OWN_LEARNERS else table_learner_class(learner)
+        if learner not in OWN_LEARNERS and table_class is None:
+            valid = ", ".join([*LEARNERS, *outside_learners()])
+            raise SpecMismatch(f"generic program: no learner {learner!r}; valid: {valid}")
+        if table_class is not None and not (ids or symbols):
+            raise SpecMismatch(
+                f"generic program: learner {learner!r} learns over a table of states; world {spec.world_id} "
+                "observes neither a state id nor integer symbols (learner=auto picks one that fits)"
+            )
         self.learner = learner
-        self.tabular = learner == "tabular"
+        self.tabular = learner == "tabular" or table_class is not None  # a table of states
         self.keyed = self.tabular and not ids  # a table of distinct observations, not given state ids
         self._ids: dict[bytes, int] = {}
         self.stochastic = False
@@ -570,6 +591,7 @@ class GenericProgram(Program):
         basis: Any
         self.sarsa: SarsaLambda | None = None
         self.planner: ModelPlanner | None = None
+        self.model: TableLearner | None = None
         if self.tabular:
             if ids:
                 self.low = int(s0.low)
@@ -577,6 +599,17 @@ class GenericProgram(Program):
             else:
                 self.low, self.n_states = 0, prm.table_size
             basis = TabularBasis(self.n_states, self.n_actions)
+            if table_class is TabularModel:
+                self.model = TabularModel(
+                    self.n_states,
+                    self.n_actions,
+                    gamma=prm.model_gamma,
+                    known_stochastic=prm.model_known,
+                    epsilon=prm.model_epsilon,
+                    seed=int(self.rng.integers(2**31)),
+                )
+            elif table_class is not None:
+                self.model = table_class(self.n_states, self.n_actions, seed=int(self.rng.integers(2**31)))  # type: ignore[call-arg]
         elif learner == "sarsa":
             self.n_states = 0
             coder = TileCoder(np.zeros(d), np.ones(d), prm.tiles, prm.tilings, memory=prm.memory)
@@ -633,6 +666,11 @@ class GenericProgram(Program):
         self._seen = 0
         self._fitted_at = 0
         self.lspi = LSPI(basis, gamma=prm.gamma, ridge=prm.ridge, capacity=prm.max_samples)
+        if self.model is not None:
+            # near-ties of the plan's exact values: a quarter of the gap between the shortest way and
+            # a detour of two steps (1 - gamma^2); the LSPI weights are unused
+            self.lspi.gamma = prm.model_gamma
+            self.lspi.tie_tolerance = 0.25 * (1.0 - prm.model_gamma**2)
         self._tie_tolerance = self.lspi.tie_tolerance
         self.phase = "explore"
         self.new_samples = 0
@@ -670,6 +708,11 @@ class GenericProgram(Program):
         self._start_lo = np.full(d, np.inf)  # the range of start observations met while warming up
         self._start_hi = np.full(d, -np.inf)
         self._fresh = False  # planner: a node met for the first time since the last plan started
+        self._last_choice = 0  # the action table's row the last sweep step sent
+        self.retried_total = 0  # traces run once more before they counted (`_in_doubt`), every sweep
+        self._swept_policy: np.ndarray | None = None  # model learner: the greedy policy swept last
+        self._since_sweep = 0  # model learner: transitions since the last sweep (by plans)
+        self._plan_for_sweep = False  # the plan in flight is swept when it is swapped in
         self.use_background(prm.learn_lag)
 
     @property
@@ -693,19 +736,26 @@ class GenericProgram(Program):
         """The learner chosen for the world's observation (said in the attach event)."""
         what = {
             "tabular": "a table of distinct observations" if self.keyed else "a table of state ids",
+            "model": "a counted model of "
+            + ("a table of distinct observations" if self.keyed else "a table of state ids")
+            + ", value iteration on it, optimistic about untried actions",
             "sarsa": f"tile-coded Sarsa(lambda), {self.sarsa.coder.dims if self.sarsa else 0} values"
             + (", hashed tiles" if self.sarsa and self.sarsa.coder.hashed else ""),
             "lspi": "LSPI over PCA + RBF features",
             "planner": f"a learned local-linear model and interpolated value iteration, "
             f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes"
             + (", over motor coordinates of the frames" if self.motor else ""),
-        }[self.learner]
+        }.get(
+            self.learner,
+            f"{type(self.model).__module__}.{type(self.model).__name__} over "
+            + ("a table of distinct observations" if self.keyed else "a table of state ids"),
+        )
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
     def _new_sweep(self, n: int | None = None, repeats: int | None = None) -> StartStateSweep:
         """A sweep of every start state, `samples` traces each in a stochastic world (or `n` traces,
         `repeats` per start: the shape of a saved sweep, which the world may since have changed)."""
-        k = repeats if repeats is not None else self.params.samples if self.stochastic else 1
+        k = repeats if repeats is not None else self.samples if self.stochastic else 1
         n = n if n is not None else self.spec.n_starts * k
         return StartStateSweep(n, self.max_trace, goal=lambda o: reached(self.goal, o), repeats=k)
 
@@ -779,6 +829,8 @@ class GenericProgram(Program):
         return i
 
     def _weights(self) -> np.ndarray:
+        if self.model is not None:
+            return self.model.q.ravel()
         if self.planner is not None:
             return self.planner.w
         return self.sarsa.w if self.sarsa is not None else self.lspi.w
@@ -832,7 +884,7 @@ class GenericProgram(Program):
             EventOutput(
                 EventKind.POLICY_ITERATION,
                 f"the world is stochastic (one observation and action led to different observations): "
-                f"{self.params.samples} traces per start state, {self.params.estimator} estimator",
+                f"{self.samples} traces per start state, {self.estimator} estimator",
                 obs.step,
                 reason="stochastic",
             )
@@ -841,6 +893,9 @@ class GenericProgram(Program):
     def _plan_for_chance(self) -> None:
         """The tabular learner in a stochastic world learns the expected outcome over a long horizon
         (`stochastic_gamma`) from more of its experience (`stochastic_samples`); as given otherwise."""
+        if self.model is not None:
+            self.model.set_stochastic(self.stochastic)
+            return
         if self.tabular:
             chance = self.stochastic
             self.lspi.gamma = g = self.params.stochastic_gamma if chance else self.params.gamma
@@ -957,6 +1012,7 @@ class GenericProgram(Program):
         """A sweep finished: accept, publish, feed the detector, or sweep the accepted policy again."""
         sw = self._sweep
         k = sw.repeats
+        self.retried_total += sw.retries
         if self.stochastic and k > 1 and all(sw.traces[i] == sw.traces[i - i % k] for i in range(len(sw.traces))):
             # every start's samples were the same trace: the policy controls whatever made the
             # transitions differ (or distinct states looked alike), so one trace per start will do
@@ -978,57 +1034,26 @@ class GenericProgram(Program):
                     reason="deterministic",
                 )
             )
-        score = _sweep_score(sw.reached, sw.traces)
-        frac, length = score
-        good = frac >= self.params.watch_after
+        new = sweep_score(sw.reached, sw.traces)
+        score = (new.fraction, new.length)
+        good = new.fraction >= self.params.watch_after
         best = self._best
         disparity = end_disparity(self._ends)
-        by_ends = self._by_ends() and disparity is not None and self._best_disparity is not None
-        if by_ends:
-            # net moves: a map is as good as its traces end where their starts would have them
-            # (`end_disparity`), and a policy that reaches the goal from more starts may end them worse
-            assert disparity is not None and self._best_disparity is not None
-            better = good and disparity < self._best_disparity - 1e-12
-            equal = good and abs(disparity - self._best_disparity) <= 1e-12
-        elif self.stochastic and best is not None and self._accepted_reached is not None:
-            # goal fractions are estimates from sampled traces: a newer policy is better only beyond
-            # the noise of both its sweep and the accepted one's (one-sided, 1.64 standard errors),
-            # or as good within it with traces a fifth shorter; as good within the noise is equal
-            n, m = len(sw.reached), len(self._accepted_reached)
-            p = (frac * n + best[0] * m) / (n + m)
-            noise = 1.64 * float(np.sqrt(max(p * (1 - p), 0.01) * (1 / n + 1 / m)))
-            better = frac - best[0] > noise or (abs(frac - best[0]) <= noise and length < 0.8 * best[1])
-            equal = not better and frac >= best[0] - noise
-        elif self.stochastic:
-            better = equal = True
+        if self._by_ends() and disparity is not None and self._best_disparity is not None:
+            verdict = compare_ends(disparity, self._best_disparity, good)  # (agent.programs.acceptance)
+        elif self.stochastic and (best is None or self._accepted_reached is None):
+            verdict = Verdict(True, True)  # nothing sampled to compare with yet
         else:
-            better = best is None or frac > best[0] or (frac == best[0] and length < best[1] - 1e-9)
-            equal = best is not None and frac == best[0] and length <= best[1] + 1e-9
+            accepted = None if best is None else Score(best[0], best[1], len(self._accepted_reached or ()))
+            verdict = compare(new, accepted, self.stochastic)
+        better, equal = verdict.better, verdict.equal
         same = self._accepted_traces is not None and [list(t) for t in sw.traces] == self._accepted_traces
         self.phase = "explore"
         if self.stochastic and not (self._watching or self._checking or better) and best is not None:
             # not better beyond the noise: the accepted map stays the published one; when `settle`
             # newer policies in a row were not, the accepted policy has converged (the best there is
             # in a world where no policy reaches `watch_after` of the starts) and is watched
-            self._held += 1
-            if self._held >= self.params.settle:
-                self._watching = True
-                self.emit(
-                    EventOutput(
-                        EventKind.POLICY_ITERATION,
-                        f"the accepted policy (goal from {best[0]:.0%} of sampled traces) held through "
-                        f"{self._held} newer policies, none better beyond the noise: watched from here",
-                        step,
-                        reason="settled",
-                    )
-                )
-                if self.relearn_at is not None and self._accepted_traces and self._accepted_reached:
-                    # after a drop, the settled policy is the relearned one: its map (published when
-                    # it was accepted) again, now saying so
-                    self._checking = True
-                    acc = (self._accepted_traces, self._accepted_reached)
-                    self._embed(step, True, len(acc[0]) // self.spec.n_starts, of=acc)
-                    self._checking = False
+            self._hold(step)
             return None
         if self._watching and not self._checking and self._accepted is not None and not (better or same):
             if equal:
@@ -1079,6 +1104,10 @@ class GenericProgram(Program):
             self._checking = False
             return None
         relearned = good and self.relearn_at is not None
+        if self._watching and same and not relearned:
+            # the accepted policy's own traces again: the published map stands (a version is a new map)
+            self._checking = False
+            return None
         if relearned:
             self._relearn_unconfirmed = 0
         if not self._checking and (better or not self._watching):
@@ -1092,6 +1121,30 @@ class GenericProgram(Program):
         self._embed(step, relearned, k)
         self._checking = False
         return None
+
+    def _hold(self, step: int) -> None:
+        """A newer policy was not better beyond the noise (stochastic world): one more round the
+        accepted policy held; after `settle` of them it has converged and is watched."""
+        assert self._best is not None
+        self._held += 1
+        if self._held >= self.params.settle:
+            self._watching = True
+            self.emit(
+                EventOutput(
+                    EventKind.POLICY_ITERATION,
+                    f"the accepted policy (goal from {self._best[0]:.0%} of sampled traces) held through "
+                    f"{self._held} newer policies, none better beyond the noise: watched from here",
+                    step,
+                    reason="settled",
+                )
+            )
+            if self.relearn_at is not None and self._accepted_traces and self._accepted_reached:
+                # after a drop, the settled policy is the relearned one: its map (published when
+                # it was accepted) again, now saying so
+                self._checking = True
+                acc = (self._accepted_traces, self._accepted_reached)
+                self._embed(step, True, len(acc[0]) // self.spec.n_starts, of=acc)
+                self._checking = False
 
     def _by_ends(self) -> bool:
         """Whether policies are ranked by where their traces end (`end_disparity`) once watched: the
@@ -1139,13 +1192,13 @@ class GenericProgram(Program):
             reached=[list(flags[i * k : (i + 1) * k]) for i in range(n)],
             actions=None if self.discrete else self.actions.copy(),
             dims=self.dims,
-            estimator=prm.estimator,
+            estimator=self.estimator,
             distance=prm.distance,
             dtw_penalty=prm.dtw_penalty,
             rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
             n_actions=self.n_actions,
         )
-        frac, length = _sweep_score(list(flags), traces)
+        frac = sweep_score(list(flags), traces).fraction
         self._pending_embedding = {
             "step": step,
             "n": n,
@@ -1153,12 +1206,12 @@ class GenericProgram(Program):
             "drop_step": self.relearn_at if relearned else None,
             "iteration": self.lspi.iterations,
             "lspi_iterations": float(self.lspi.iterations),
-            "samples": float(self.lspi.n_samples),
+            "samples": float(self.lspi.n_samples if self.model is None else getattr(self.model, "n_transitions", 0)),
             "goal_reached_fraction": frac,
             "mean_trace_length": float(np.mean([len(t) for t in traces])),
             "rewarded": sum(bool(r) for r in flags),
             "traces": len(traces),
-            "samples_per_start": float(1 if prm.estimator == "plain" else k),
+            "samples_per_start": float(1 if self.estimator == "plain" else k),
             "stochastic": float(self.stochastic),
             "accepted_policy": float(self._checking),
             "watched": float(self._watching),
@@ -1305,6 +1358,78 @@ class GenericProgram(Program):
             return Decision(reset=True, start=-1)
         return Decision(tuple(float(v) for v in self.actions[a]))
 
+    def _act_model(self, obs: Observation) -> Decision:
+        """The model learner: count every transition (in sweeps too: a model learns from whatever
+        chose the action), plan off the act path when new actions became known or after
+        `samples_per_iteration` transitions (then the plan's greedy policy is swept), explore
+        optimistically between sweeps."""
+        assert self.model is not None and self.background is not None
+        sweep = False
+        for name, result in self.background.tick():
+            if name == "embed":
+                self._embedded(result)
+            elif name == "model":
+                self.model.install(result)
+                sweep = (self._plan_for_sweep and self._model_sweep_due(obs.step)) or sweep
+        s = self._table_id(obs)
+        if obs.t > 0 and self._prev is not None:
+            ps, pa = self._prev
+            if self._prev_key is not None:
+                self._note_transition(self._prev_key, pa, obs)
+            outcome = "goal" if reached(self.goal, obs) else "failure" if failed(self.goal, obs) else "continue"
+            self._fresh = self.model.learn_one(ps, pa, s, outcome) or self._fresh
+            self.new_samples += 1
+            self._since_plan += 1
+        self._prev, self._prev_key = None, None
+        if self.phase == "explore":
+            if sweep and self.spec.n_starts >= 2:
+                self.lspi.iterations += 1  # sweeps of the plan count as its iterations
+                return self._start_sweep(check=False)
+            if not self.background.pending("model"):
+                due = self.new_samples >= self.params.samples_per_iteration
+                if due or (self._fresh and self._since_plan >= self.params.model_every):
+                    self.background.submit("model", type(self.model).plan_job, **self.model.job_args())
+                    self._fresh, self._since_plan, self._plan_for_sweep = False, 0, due
+                    if due:
+                        self.new_samples = 0
+                        self._no_starts(obs.step)
+            if obs.done:
+                return Decision(reset=True, start=-1)
+            a = self.model.act(s)
+            self._prev, self._prev_key = (s, a), self._key(obs)
+            return Decision(tuple(float(v) for v in self.actions[a]))
+        return self._model_sweep_act(obs, s)
+
+    def _model_sweep_due(self, step: int) -> bool:
+        """Whether the plan just installed is worth a sweep: once watched always (the detector's
+        sweeps); before, when the model is complete (every action of every state met was tried
+        `known` times) and its greedy policy is not the one swept last, or when exploration has
+        gone on for 20 plans' worth of transitions. A complete model whose policy is unchanged in a
+        stochastic world is one more round that the accepted policy held (`_hold`)."""
+        assert self.model is not None
+        self._since_sweep += self.params.samples_per_iteration
+        if self._watching:
+            return True
+        complete = self.model.complete()
+        q = np.asarray(self.model.q)
+        top = q.max(axis=1, keepdims=True)
+        met = np.arange(q.shape[0]) < max(len(self._ids), 0 if self.keyed else q.shape[0])
+        policy = np.where(met, (q >= top - self.lspi.tie_tolerance * np.abs(top) - 1e-12).argmax(axis=1), -1)
+        changed = self._swept_policy is None or not np.array_equal(policy, self._swept_policy)
+        if complete and changed or self._since_sweep >= 20 * self.params.samples_per_iteration:
+            self._swept_policy, self._since_sweep = policy, 0
+            return True
+        if complete and self.stochastic and self._best is not None:
+            self._hold(step)
+        return False
+
+    def _model_sweep_act(self, obs: Observation, s: int) -> Decision:
+        """A sweep's step, whose transition the model counts as well."""
+        dec = self._sweep_act(obs)
+        if self.phase == "embed" and not dec.reset and not obs.done:
+            self._prev, self._prev_key = (s, self._last_choice), self._key(obs)
+        return dec
+
     def _warmup(self, obs: Observation) -> Decision:
         """A random step that measures the range of every value; at its end the tiles are laid
         over those ranges (widened by a tenth of their span on each side)."""
@@ -1399,6 +1524,8 @@ class GenericProgram(Program):
                 if name == "embed":
                     self._embedded(result)
             return self._learn_sarsa(obs)
+        if self.model is not None:
+            return self._act_model(obs)
         s: int | None = None
         if self.phase == "explore":
             s = self._state(obs)
@@ -1478,7 +1605,8 @@ class GenericProgram(Program):
         if self.planner is not None:  # a model learns from every transition, whoever chose it
             self._model_step(obs, None if dec.reset else int(dec.values[0]))
         if not dec.reset:
-            dec = Decision(tuple(float(v) for v in self.actions[int(dec.values[0])]))
+            self._last_choice = int(dec.values[0])
+            dec = Decision(tuple(float(v) for v in self.actions[self._last_choice]))
         if self._sweep.finished:
             again = self._swept(obs.step)
             if again is not None:
@@ -1521,7 +1649,12 @@ class GenericProgram(Program):
             self.sarsa.reset()
         if self.planner is not None:
             self.planner.reset()
+        if self.model is not None:
+            self.model.reset()
+            self._fresh, self._since_plan = False, 0
+            self._swept_policy, self._since_sweep = None, 0
         assert self.background is not None
+        self.background.discard("model")
         self.background.discard("plan")
         self.background.discard("lspi")  # an iteration over the dropped samples is never swapped in
         self.new_samples = 0
@@ -1563,6 +1696,7 @@ class GenericProgram(Program):
             "seen_count": self._seen,
             "fitted_at": self._fitted_at,
             "said_no_starts": self._said_no_starts,
+            "retried_total": self.retried_total,
             "watching": self._watching,
             "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
             # (observation, previous action) pairs met on the trace in progress: its cycle check
@@ -1591,6 +1725,11 @@ class GenericProgram(Program):
             if self._rotations is None
             else [self._rotations.order, [list(p) for p in self._rotations.powers]],
         }
+        if self.model is not None:
+            out["model"] = self.model.state()
+            out.update(fresh=self._fresh, since_plan=self._since_plan, last_choice=self._last_choice)
+            out.update(swept_policy=self._swept_policy, since_sweep=self._since_sweep)
+            out["plan_for_sweep"] = self._plan_for_sweep
         if self.planner is not None:
             out["planner"] = self.planner.state()
             out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy())
@@ -1628,6 +1767,7 @@ class GenericProgram(Program):
         self._next_id, self._seen = int(state["next_id"]), int(state["seen_count"])
         self._fitted_at = int(state["fitted_at"])
         self._said_no_starts = bool(state["said_no_starts"])
+        self.retried_total = int(state.get("retried_total", 0))  # absent in older checkpoints
         self._watching = bool(state["watching"])
         pending = state.get("pending_embedding")
         self._pending_embedding = None if pending is None else dict(pending)
@@ -1669,6 +1809,14 @@ class GenericProgram(Program):
         self._start_fair = bool(state.get("start_fair", True))
         rot = state.get("rotations")
         self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
+        if self.model is not None:
+            self.model.restore(state["model"])
+            self._fresh, self._since_plan = bool(state["fresh"]), int(state["since_plan"])
+            self._last_choice = int(state["last_choice"])
+            sp_ = state.get("swept_policy")
+            self._swept_policy = None if sp_ is None else np.asarray(sp_, dtype=np.int64)
+            self._since_sweep = int(state["since_sweep"])
+            self._plan_for_sweep = bool(state["plan_for_sweep"])
         if self.planner is not None:
             self.planner.restore(state["planner"])
             self._start_lo = np.asarray(state["start_lo"], dtype=np.float64)

@@ -15,7 +15,7 @@ import json
 import sys
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -24,6 +24,7 @@ from sensorimotor.agent.detectors import make_detector
 from sensorimotor.agent.embedding import procrustes_error
 from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol.messages import EventKind
+from sensorimotor.tools.bench.ceiling import toy_text_ceiling
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.registry import make_world
 
@@ -34,11 +35,33 @@ class ZooWorld:
 
     label: str
     world: str
-    params: dict[str, str] = field(default_factory=dict)
+    params: dict[str, Any] = field(default_factory=dict)
     program: dict[str, str] = field(default_factory=dict)
     steps: int = 100_000
     quick_steps: int = 20_000
     needs: str = ""  # a module the world needs (skipped, and said, when missing)
+
+
+def _random_lake(seed: int) -> tuple[str, ...]:
+    """Gymnasium's random 10 x 10 FrozenLake map of `seed` (p = 0.8 frozen)."""
+    from gymnasium.envs.toy_text.frozen_lake import generate_random_map
+
+    return tuple(generate_random_map(size=10, p=0.8, seed=seed))
+
+
+def _lakes() -> tuple[ZooWorld, ...]:
+    return tuple(
+        ZooWorld(
+            f"FrozenLake random 10x10 (map {s}){'' if slip else ', not slippery'}",
+            "gym:FrozenLake-v1",
+            {"desc": list(_random_lake(s)), "is_slippery": str(slip).lower()},
+            {},
+            100_000,
+            30_000,
+        )
+        for slip in (False, True)
+        for s in (0, 1, 2)
+    )
 
 
 ZOO: tuple[ZooWorld, ...] = (
@@ -58,6 +81,9 @@ ZOO: tuple[ZooWorld, ...] = (
     ),
     ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 50_000, 10_000),
     ZooWorld("MiniGrid Empty 8x8", "gym:MiniGrid-Empty-8x8-v0", {}, {}, 60_000, 20_000, "minigrid"),
+    ZooWorld("MiniGrid Empty 16x16", "gym:MiniGrid-Empty-16x16-v0", {}, {}, 100_000, 30_000, "minigrid"),
+    ZooWorld("MiniGrid LavaGap S7", "gym:MiniGrid-LavaGapS7-v0", {}, {}, 100_000, 30_000, "minigrid"),
+    ZooWorld("MiniGrid SimpleCrossing S9N1", "gym:MiniGrid-SimpleCrossingS9N1-v0", {}, {}, 100_000, 30_000, "minigrid"),
     ZooWorld("MountainCar", "gym:MountainCar-v0", {}, {}, 100_000, 30_000),
     ZooWorld("MountainCarContinuous", "gym:MountainCarContinuous-v0", {}, {}, 100_000, 30_000),
     ZooWorld("MountainCarContinuous, DTW", "gym:MountainCarContinuous-v0", {}, {"distance": "dtw"}, 100_000, 30_000),
@@ -80,6 +106,7 @@ ZOO: tuple[ZooWorld, ...] = (
         10_000,
         "panda_gym",
     ),
+    *_lakes(),
 )
 
 
@@ -164,6 +191,7 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
         embs = [e for e in run.embeddings if e.procrustes_error is not None]
         peers = sensor_peers(w, program.dims if hasattr(program, "dims") else 2) if embs else {}
         truth = w.truth()
+        ceiling = toy_text_ceiling(w, program) if embs else None
     errors = [float(e.procrustes_error) for e in embs if e.procrustes_error is not None]
     drops = [e.step for e in run.events(EventKind.DROP_DETECTED)]
     # after convergence (the first version that reached the goal from >= 90 % of starts, or that was
@@ -175,6 +203,8 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
         pos = np.asarray(truth.tensors["positions"], dtype=np.float64)[np.asarray(embs[-1].ids)]
         trust = _trustworthiness(pos, np.asarray(embs[-1].coordinates))
     last = embs[-1] if embs else None
+    # learning speed: the first version within 1.5x of the final error
+    near = next((e.step for e in embs if errors and float(e.procrustes_error or 0.0) <= 1.5 * errors[-1] + 1e-9), None)
     return {
         "world": z.label,
         "name": z.world,
@@ -191,6 +221,10 @@ def run_one(z: ZooWorld, seed: int, steps: int) -> dict[str, Any]:
         "goal_reached_fraction": last.metrics.get("goal_reached_fraction") if last else None,
         "stochastic": bool(last.metrics.get("stochastic", 0.0)) if last else False,
         "steps_to_0.1": first.get("step"),
+        "steps_to_1.5x_final": near,
+        "steps_per_second": round(run.steps / max(seconds, 1e-9), 1),
+        "optimal_goal_fraction": None if ceiling is None else ceiling.goal_reached_fraction,
+        "optimal_error": None if ceiling is None else ceiling.error,
         "seconds_to_0.1": round(first["seconds"], 1) if "seconds" in first else None,
         "regressions": regressions,
         "worst_ratio": worst,
@@ -226,6 +260,10 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "trustworthiness",
             "goal_reached_fraction",
             "steps_to_0.1",
+            "steps_to_1.5x_final",
+            "steps_per_second",
+            "optimal_goal_fraction",
+            "optimal_error",
             "pca_error",
             "isomap_error",
         )
@@ -253,11 +291,13 @@ def main(
     json_out: bool = False,
     workers: int = 1,
     seed_list: list[int] | None = None,
+    defaults: bool = False,
 ) -> int:
     """Run the zoo; print one line per run and a summary table (or JSON lines). With `workers` > 1
     the runs go to that many processes (each run is seeded: the figures are the same). `seed_list`:
     exactly these seeds instead of 0 .. seeds-1 (a run of seed 2 alone gives what seed 2 gives in
-    `--seeds 3`)."""
+    `--seeds 3`). `defaults`: every world once, with no program parameter set (the rows that differ
+    only by their program parameters are one row then)."""
     import importlib.util
     import multiprocessing as mp
 
@@ -268,7 +308,14 @@ def main(
         return z.label.lower() == o if o in labels else o in z.label.lower() or o == z.world.lower()
 
     tasks = []
+    seen: set[str] = set()
     for z in ZOO:
+        if defaults:
+            key = json.dumps([z.world, z.params], sort_keys=True)
+            if key in seen:
+                continue
+            seen.add(key)
+            z = replace(z, program={})
         if only and not any(chosen_by(o, z) for o in only):
             continue
         if z.needs and importlib.util.find_spec(z.needs) is None:
@@ -307,7 +354,11 @@ def main(
         "best_error",
         "trustworthiness",
         "goal_reached_fraction",
+        "optimal_goal_fraction",
+        "optimal_error",
         "steps_to_0.1",
+        "steps_to_1.5x_final",
+        "steps_per_second",
         "pca_error",
         "isomap_error",
         "regressions",
@@ -343,7 +394,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", action="store_true", help="one JSON object per run, then per world")
     p.add_argument("--workers", type=int, default=1, help="processes the runs are spread over (default 1)")
-    p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json, a.workers, a.seed))
+    p.add_argument(
+        "--defaults",
+        action="store_true",
+        help="every world once with no program parameter set (what a new user gets); rows that differ only "
+        "by their program parameters are one row then",
+    )
+    p.set_defaults(func=lambda a: main(a.seeds, a.quick, a.world, a.json, a.workers, a.seed, a.defaults))
 
 
 __all__ = ["ZOO", "ZooWorld", "main", "post_convergence", "run_one", "sensor_peers", "summary"]
