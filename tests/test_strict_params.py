@@ -137,8 +137,10 @@ def test_perturbations_refuse_lenient_values_with_a_bounded_message():
             check_perturbation("retina", kinds, Control("r1", kind, params, 1))
         assert len(str(e.value)) < BOUND + 300
     from sensorimotor.tools.perturb import refuse_locally  # what `sme perturb` prints before sending
+    from sensorimotor.worlds.registry import make_world
 
-    why = refuse_locally("retina", Control("r1", "lesion", {"radius": "0." + "9" * 100_000}, 1))
+    spec = make_world("retina", "r1", seed=0).spec()
+    why = refuse_locally(spec, Control("r1", "lesion", {"radius": "0." + "9" * 100_000}, 1))
     assert why is not None and len(why) < BOUND + 300
 
 
@@ -287,3 +289,17 @@ def test_a_repeated_program_param_is_refused():
     assert parse_program_params(["gridworld.gamma=0.9"])["gridworld"]["gamma"] == 0.9
     with pytest.raises(ParamError, match="'gridworld.gamma' is given twice"):
         parse_program_params(["gridworld.gamma=0.9", "gridworld.gamma=0.8"])
+
+
+def test_generic_perturbations_read_their_index_lists_strictly():
+    from sensorimotor.worlds.body_changes.motor import _order
+
+    order = ",".join(str(i) for i in range(1, 11)) + ",0"
+    assert _order(order, 11) == [*range(1, 11), 0]
+    with pytest.raises(PerturbationError, match="permute: order="):
+        _order("1_0," + ",".join(str(i) for i in range(10)), 11)  # main read 1_0 as 10
+    with pytest.raises(PerturbationError, match="permute: order="):
+        _order("\u0661:0", 2)  # an Arabic-Indic 1
+    with pytest.raises(PerturbationError) as e:
+        _order("9" * 1000, 11)
+    assert len(str(e.value)) < BOUND
