@@ -303,3 +303,12 @@ def test_generic_perturbations_read_their_index_lists_strictly():
     with pytest.raises(PerturbationError) as e:
         _order("9" * 1000, 11)
     assert len(str(e.value)) < BOUND
+
+
+def test_a_100_kb_perturbation_kind_is_not_echoed():
+    from sensorimotor.tools.perturb import refuse_locally
+    from sensorimotor.worlds.registry import make_world
+
+    spec = make_world("retina", "r1", seed=0).spec()
+    why = refuse_locally(spec, Control("r1", "k" * 100_000, {}, 1))
+    assert why is not None and "has no perturbation 'kkk" in why and len(why) < BOUND + 300

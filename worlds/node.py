@@ -38,6 +38,7 @@ from sensorimotor.protocol.messages import (
     WorldSpec,
     clip,
 )
+from sensorimotor.protocol.params import quote
 from sensorimotor.worlds.base import PerturbationError, World
 from sensorimotor.worlds.body_changes.layer import served
 from sensorimotor.worlds.lease import LeaseCounts, LeaseKeeper
@@ -312,7 +313,7 @@ class WorldNode:
                         keys.world_truth(self.world_id), self._truth_bytes, codec.schema_name(type(self.world.truth()))
                     )
             except (PerturbationError, ValueError) as e:
-                self._reject("bad_control", f"control {ctl.kind!r}: {e}")
+                self._reject("bad_control", f"control {quote(ctl.kind)}: {e}")
                 self._world_event(
                     WorldEvent(
                         self.world_id,
