@@ -1169,6 +1169,11 @@ class AgentDaemon:
         audit = TokenAudit()
         exprs = (keys.ALL_ALIVE_WORLDS, keys.ALL_ALIVE_OWNERS, keys.ALL_CLAIMS)
         steps: dict[str, int] = {}
+        # a router answers from its own tables; a client (a worker) through its link to one, whose
+        # answers go empty while the link is re-made under load: a client books only what the audit
+        # finds alive (a missed appearance leaves a world nobody claims; a false disappearance
+        # would pause a live world and hand it off; a missed disappearance only keeps a claim)
+        router = getattr(getattr(self.bus, "config", None), "mode", "router") == "router"
         while not self._stop.wait(self.AUDIT_EVERY):
             held = self.book.tokens()  # before the queries: an event meanwhile shows as touched
             sure = self._surely_alive(steps)
@@ -1188,8 +1193,8 @@ class AgentDaemon:
                     log.debug("liveliness audit of %s skipped: the answer lacks %d live tokens", expr, len(lacking))
                     continue
                 for key, is_alive, since in audit.check(expr, booked, alive, time.monotonic(), self.book.touched):
-                    if not is_alive and self._answers_alive(key):
-                        continue  # absent from the list, present when asked alone: a lost reply
+                    if not is_alive and (not router or self._answers_alive(key)):
+                        continue  # see below, and: absent from the list, present when asked alone (a lost reply)
                     if not self.book.mend(expr, key, is_alive, since):
                         continue
                     self.counters["liveliness_mended"] += 1

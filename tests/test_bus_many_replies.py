@@ -154,3 +154,38 @@ def test_the_audit_does_not_book_as_gone_what_a_lossy_answer_left_out():
     assert "w1" in view.worlds  # left out of the answer, found when asked alone: not gone
     assert view.claimants("w2") == {"a1"}  # that answer lacked this owner's own claim: not used
     assert "ghost" not in view.worlds and d.counters["liveliness_mended"] == 1
+
+
+def test_a_client_audit_books_only_what_it_finds_alive():
+    """A worker (a client session) sees empty answers while its link to the router is re-made under
+    load: its audit books appearances, never disappearances (those come with the events)."""
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    from sensorimotor.agent.daemon import AgentDaemon
+    from sensorimotor.protocol import keys
+    from tests.conftest import wait_for
+
+    bus = _LossyBus(
+        alive=set(),  # nothing found, not even alone
+        answers={
+            keys.ALL_ALIVE_WORLDS: [keys.alive_world("back")],
+            keys.ALL_ALIVE_OWNERS: [keys.alive_owner("m.w1")],
+            keys.ALL_CLAIMS: [],
+        },
+    )
+    bus.config = SimpleNamespace(mode="client")  # type: ignore[attr-defined]
+    d = AgentDaemon(bus, agent_id="m", owner_id="m.w1")  # type: ignore[arg-type]
+    d.AUDIT_EVERY = 0.05
+    d.book.owner("m.w1", True)
+    d.book.world("w1", True)  # absent from every answer
+    t0 = time.monotonic()
+    th = threading.Thread(target=d._audit_liveliness, daemon=True)
+    th.start()
+    try:
+        assert wait_for(lambda: bus.calls and bus.calls[-1] - t0 > 3.0, 20)
+    finally:
+        d.stop()
+        th.join(5)
+    assert d.book.view().worlds == {"w1", "back"} and d.counters["liveliness_mended"] == 1
