@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.protocol.keys import check_id
+from sensorimotor.protocol.limits import EMBEDDING_VERSION_MAX, EPOCH_MAX
 from sensorimotor.protocol.messages import ActionSpace, SensorSpec, WorldSpec
 
 FORMAT = "sensorimotor-checkpoint"
@@ -42,7 +43,9 @@ ARRAY_MARK = "__array__"
 MAX_CHECKPOINT_BYTES = 32 * 1024 * 1024  # a checkpoint file (or shared copy) larger than this is refused unread
 MAX_INFLATED_BYTES = 256 * 1024 * 1024  # the sum of the zip entries' declared sizes, checked before inflating
 MAX_CLOCK_SKEW = 300.0  # seconds a checkpoint may be dated in the future (clocks of other hosts)
-MAX_COUNTER = 2**53  # version and steps above this are not counts any run can reach
+MAX_COUNTER = 2**53  # steps above this are not counts any run can reach (nor exact in JSON)
+#: a restored embedding version must leave room for the next one on the wire (a uint32 field)
+MAX_VERSION = EMBEDDING_VERSION_MAX - 1
 
 
 class CheckpointError(Exception):
@@ -256,14 +259,23 @@ def _check_sizes(data: bytes) -> None:
 
 def check_values(ckpt: Checkpoint, now: float | None = None) -> None:
     """Refuse a checkpoint that parses but whose values cannot be right: a world id that is not an
-    id, counters out of range, non-finite arrays, a time in the future (beyond MAX_CLOCK_SKEW)."""
+    id, counters out of range (the embedding version and epoch beyond what the wire carries, see
+    `protocol.limits`), non-finite arrays, a time in the future (beyond MAX_CLOCK_SKEW)."""
     try:
         check_id(ckpt.world_id, "world id")
     except ValueError as e:
         raise CheckpointError(str(e)) from None
-    for name, value in (("version", ckpt.version), ("steps", ckpt.steps)):
-        if not 0 <= value < MAX_COUNTER:
-            raise CheckpointError(f"its {name} {value} is out of range (0 .. 2**53)")
+    if not 0 <= ckpt.version <= MAX_VERSION:
+        raise CheckpointError(
+            f"its version {ckpt.version} is out of range (0 .. {MAX_VERSION}: the next version must fit the "
+            "wire's uint32 embedding version)"
+        )
+    if not 0 <= ckpt.steps < MAX_COUNTER:
+        raise CheckpointError(f"its steps {ckpt.steps} is out of range (0 .. 2**53)")
+    if not 0 <= ckpt.epoch <= EPOCH_MAX:
+        raise CheckpointError(
+            f"its epoch {ckpt.epoch} is out of range (0 .. {EPOCH_MAX}: the wire's uint64 lease epoch)"
+        )
     now = time.time() if now is None else now
     if not (math.isfinite(ckpt.saved_at) and 0 <= ckpt.saved_at <= now + MAX_CLOCK_SKEW):
         raise CheckpointError(f"it is dated {ckpt.saved_at!r}: not a time up to now (+{MAX_CLOCK_SKEW:g} s)")

@@ -60,8 +60,3 @@ def embedding_scores(output: EmbeddingOutput, truth: Truth | None) -> EmbeddingS
         fs.n_neighbors,
         fs.n_points,
     )
-
-
-def score_embedding(output: EmbeddingOutput, truth: Truth | None) -> float | None:
-    """Procrustes error of the output against truth, or None when truth is unknown."""
-    return evaluate_embedding(output, truth).get("procrustes_error")

@@ -4,8 +4,9 @@ Sphinx with the furo theme and MyST markdown, as Gymnasium's site is built: MkDo
 maintained and mkdocs-material has been in maintenance mode since late 2025, while Sphinx's autodoc
 reads the package's numpy-style docstrings directly (napoleon) for the API reference.
 
-Every page under docs/ is picked up by the index's glob toctrees; the commands' `--help` texts are
-written into docs/_generated/ from the real parser at each build, so the reference cannot drift."""
+Every page under docs/ is listed once in the index's toctrees (tests/test_docs.py checks it); the
+commands' `--help` texts are written into docs/_generated/ from the real parser at each build, so
+the reference cannot drift."""
 
 from __future__ import annotations
 

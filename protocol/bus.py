@@ -16,6 +16,7 @@ import collections
 import json
 import logging
 import re
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -37,6 +38,44 @@ def zenoh_words(e: BaseException) -> str:
     if text.startswith("Unable to connect to any of"):
         return "nothing answered there"
     return text or type(e).__name__
+
+
+def _listening(endpoint: str, timeout: float = 0.5) -> bool:
+    """Whether something accepts a TCP connection at a tcp/ or tls/ `endpoint` (False otherwise)."""
+    proto, _, rest = endpoint.partition("/")
+    if proto not in ("tcp", "tls"):
+        return False
+    host, _, port = re.split(r"[?#]", rest, maxsplit=1)[0].rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+def refusal(config: BusConfig) -> str | None:
+    """Why a client session was not opened when a router does listen at one of its endpoints: it
+    refused the session's handshake, i.e. its authentication (None: nothing listens there)."""
+    where = [ep for ep in config.connect if _listening(ep)]
+    if not where:
+        return None
+    text = ""
+    if config.config_file:
+        try:
+            with open(config.config_file, encoding="utf-8", errors="replace") as f:
+                text = f.read(1_000_000)
+        except OSError:
+            pass
+    if "usrpwd" in text:
+        how = (
+            f"the user and password of transport/auth/usrpwd in {config.config_file} are not in the router's "
+            "dictionary file"
+        )
+    elif config.secure_dir:
+        how = f"the router does not accept the certificate of {config.secure_dir}"
+    else:
+        how = "the router requires authentication (user/password or TLS) this session does not offer"
+    return f"the router at {where[0]} refused this session: authentication refused ({how})"
 
 
 class BusError(RuntimeError):
@@ -427,6 +466,9 @@ class Bus:
         except zenoh.ZError as e:
             why = zenoh_words(e)
             if config.mode == "client":
+                refused = refusal(config)
+                if refused is not None:
+                    raise BusError(f"{refused}. Fix the credentials, or use the ones the router accepts.") from None
                 where = ", ".join(config.connect) or "(no --connect endpoint)"
                 raise BusError(
                     f"no agent at {where} ({why}). Start one with `sme agent` (add --listen ENDPOINT for another "
@@ -457,9 +499,14 @@ class Bus:
                 if deadline is not None and time.monotonic() >= deadline:
                     raise
                 if not told:
-                    log.warning(
-                        "waiting for the agent at %s (start `sme agent`; Ctrl-C gives up)", ", ".join(config.connect)
-                    )
+                    refused = refusal(config)
+                    if refused is not None:  # waiting does not fix credentials, but the router's may change
+                        log.warning("%s; trying again (Ctrl-C gives up)", refused)
+                    else:
+                        log.warning(
+                            "waiting for the agent at %s (start `sme agent`; Ctrl-C gives up)",
+                            ", ".join(config.connect),
+                        )
                     told = True
                 time.sleep(0.5)
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from google.protobuf.message import DecodeError
 
-from sensorimotor.protocol import errors, keys
+from sensorimotor.protocol import errors, keys, limits
 from sensorimotor.protocol import messages as m
 from sensorimotor.protocol import sme_v1_pb2 as pb
 
@@ -64,6 +64,13 @@ def _not_nan(value: float, what: str) -> float:
 def _finite(value: float, what: str) -> float:
     if not math.isfinite(value):
         raise errors.NonFiniteValue(f"{what} is {value!r}; only finite numbers are accepted")
+    return value
+
+
+def _limited(value: int, limit: int, what: str) -> int:
+    """`value` if its wire field (`protocol.limits`) can carry it; OutOfRange naming the field otherwise."""
+    if not limits.within(value, limit):
+        raise errors.OutOfRange(f"{what} {value!r} is out of the wire's range 0 .. {limit}")
     return value
 
 
@@ -205,7 +212,7 @@ def _enc_emb(x: m.Embedding) -> pb.Embedding:
         schema_version=m.SCHEMA_VERSION,
         agent_id=x.agent_id,
         world_id=x.world_id,
-        version=x.version,
+        version=_limited(x.version, limits.EMBEDDING_VERSION_MAX, "Embedding.version"),
         trigger=x.trigger,
         ids=list(x.ids),
         eigenvalues=[float(e) for e in x.eigenvalues],
@@ -320,7 +327,9 @@ def _enc_status(x: m.AgentStatus) -> pb.AgentStatus:
             state=ln.state,
             steps=ln.steps,
             episodes=ln.episodes,
-            embedding_version=ln.embedding_version,
+            embedding_version=_limited(
+                ln.embedding_version, limits.EMBEDDING_VERSION_MAX, f"LinkStatus {ln.world_id!r} embedding_version"
+            ),
             reward_mean=ln.reward_mean,
             last_procrustes_error=ln.last_procrustes_error,
             detector_statistic=ln.detector_statistic,
@@ -610,7 +619,12 @@ def encode(msg: Any) -> bytes:
         _, enc, _ = _CODECS[type(msg)]
     except KeyError:
         raise TypeError(f"not a protocol message: {type(msg).__name__}") from None
-    data = enc(msg).SerializeToString()
+    try:
+        data = enc(msg).SerializeToString()
+    except errors.ProtocolError:
+        raise
+    except ValueError as e:  # protobuf's "Value out of range: N" for an integer beyond its field
+        raise errors.OutOfRange(f"{type(msg).__name__}: {e} (see protocol.limits)") from None
     if len(data) > MAX_MESSAGE_BYTES:
         raise errors.OversizeMessage(f"{type(msg).__name__}: {len(data)} bytes, at most {MAX_MESSAGE_BYTES}")
     return data

@@ -45,6 +45,12 @@ class NonFiniteValue(ProtocolError):
     kind = "non_finite"
 
 
+class OutOfRange(ProtocolError):
+    """A number beyond its wire field's range (`protocol.limits`: a uint32 embedding version...)."""
+
+    kind = "out_of_range"
+
+
 class SpecMismatch(ProtocolError):
     """Well-formed, but not what the world's spec promised (missing sensor, wrong action size...)."""
 

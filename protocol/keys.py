@@ -37,268 +37,82 @@ def check_id(value: str, what: str = "id") -> str:
 
 
 def world_obs(world: str) -> str:
-    """Key of a world's observations (Observation messages, one per step).
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of a world's observations (Observation messages, one per step)."""
     return f"{PREFIX}/world/{world}/obs"
 
 
 def world_act(world: str) -> str:
-    """Key of the actions that answer a world's observations (Action messages).
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of the actions that answer a world's observations (Action messages)."""
     return f"{PREFIX}/world/{world}/act"
 
 
 def world_ctl(world: str) -> str:
-    """Key of a world's perturbations (Control messages, applied between steps).
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of a world's perturbations (Control messages, applied between steps)."""
     return f"{PREFIX}/world/{world}/ctl"
 
 
 def world_truth(world: str) -> str:
-    """Queryable key of a world's ground truth (Truth; for evaluation only).
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Queryable key of a world's ground truth (Truth; for evaluation only)."""
     return f"{PREFIX}/world/{world}/truth"
 
 
 def world_spec(world: str) -> str:
-    """Queryable key of a world's spec (WorldSpec: sensors, action space, program).
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Queryable key of a world's spec (WorldSpec: sensors, action space, program)."""
     return f"{PREFIX}/world/{world}/spec"
 
 
 def world_event(world: str) -> str:
-    """Key of WorldEvent messages: what the world reports about itself (e.g. a refused action).
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of WorldEvent messages: what the world reports about itself (e.g. a refused action)."""
     return f"{PREFIX}/world/{world}/event"
 
 
 def world_lease(world: str) -> str:
-    """Key of a world's lease queryable: owners ask it for the lease (LeaseRequest -> Lease).
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of a world's lease queryable: owners ask it for the lease (LeaseRequest -> Lease)."""
     return f"{PREFIX}/world/{world}/lease"
 
 
 def world_image(world: str, camera: str) -> str:
-    """Key of a world's camera frames as foxglove.RawImage, for standard viewers.
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-    camera : str
-        The camera's name (e.g. ``camera``).
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of a world's camera frames as foxglove.RawImage, for standard viewers."""
     return f"{PREFIX}/world/{world}/image/{camera}"
 
 
 def alive_world(world: str) -> str:
-    """Liveliness-token key of a serving world.
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Liveliness-token key of a serving world."""
     return f"{PREFIX}/alive/world/{world}"
 
 
 def alive_agent(agent: str) -> str:
-    """Liveliness-token key of a running agent daemon.
-
-    Parameters
-    ----------
-    agent : str
-        The agent id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Liveliness-token key of a running agent daemon."""
     return f"{PREFIX}/alive/agent/{agent}"
 
 
 def alive_owner(owner: str) -> str:
-    """Liveliness-token key of a session that may own worlds (an agent daemon or one of its workers).
-
-    Parameters
-    ----------
-    owner : str
-        The owner id (an agent id, or ``AGENT.wK`` for worker K of agent AGENT).
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Liveliness-token key of a session that may own worlds (an agent daemon or one of its workers)."""
     return f"{PREFIX}/alive/owner/{owner}"
 
 
 def alive_claim(world: str, owner: str) -> str:
-    """Liveliness-token key of owner `owner`'s claim on world `world` (see protocol/README.md, "Owners").
-
-    Parameters
-    ----------
-    world : str
-        The world id.
-    owner : str
-        The owner id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Liveliness-token key of owner `owner`'s claim on world `world` (see protocol/README.md, "Owners")."""
     return f"{PREFIX}/alive/claim/{world}/{owner}"
 
 
 def agent_checkpoint(owner: str, world: str) -> str:
-    """Key of the checkpoints (.npz bytes, see agent/checkpoint.py) owner `owner` shares of world `world`.
-
-    Parameters
-    ----------
-    owner : str
-        The owner id.
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of the checkpoints (.npz bytes, see agent/checkpoint.py) owner `owner` shares of world `world`."""
     return f"{PREFIX}/agent/{owner}/checkpoint/{world}"
 
 
 def agent_embedding(agent: str, world: str) -> str:
-    """Key of the Embedding messages agent `agent` learns from world `world`.
-
-    Parameters
-    ----------
-    agent : str
-        The agent id.
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of the Embedding messages agent `agent` learns from world `world`."""
     return f"{PREFIX}/agent/{agent}/embedding/{world}"
 
 
 def agent_event(agent: str, world: str) -> str:
-    """Key of the AgentEvent messages (drops, pauses, ...) of agent `agent` about world `world`.
-
-    Parameters
-    ----------
-    agent : str
-        The agent id.
-    world : str
-        The world id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of the AgentEvent messages (drops, pauses, ...) of agent `agent` about world `world`."""
     return f"{PREFIX}/agent/{agent}/event/{world}"
 
 
 def agent_status(agent: str) -> str:
-    """Key of an agent daemon's AgentStatus messages.
-
-    Parameters
-    ----------
-    agent : str
-        The agent id.
-
-    Returns
-    -------
-    str
-        The key expression.
-    """
+    """Key of an agent daemon's AgentStatus messages."""
     return f"{PREFIX}/agent/{agent}/status"
 
 
@@ -316,34 +130,12 @@ ALL_WORLD_EVENTS = f"{PREFIX}/world/*/event"
 
 
 def last_chunk(key: str) -> str:
-    """The last ``/``-separated chunk of `key`.
-
-    Parameters
-    ----------
-    key : str
-        A key expression (anything `str()` accepts, e.g. a zenoh KeyExpr).
-
-    Returns
-    -------
-    str
-        The chunk after the last ``/`` (all of `key` when it has none).
-    """
+    """The last ``/``-separated chunk of `key`."""
     return str(key).rsplit("/", 1)[-1]
 
 
 def world_of(key: str) -> str:
-    """The world id in a key under ``sme/v1/world/{id}/...`` or ``.../embedding|event/{id}``.
-
-    Parameters
-    ----------
-    key : str
-        A key expression (anything `str()` accepts, e.g. a zenoh KeyExpr).
-
-    Returns
-    -------
-    str
-        The world id: the chunk after ``world/`` for world keys, else the last chunk.
-    """
+    """The world id in a key under ``sme/v1/world/{id}/...`` or ``.../embedding|event/{id}``."""
     parts = str(key).split("/")
     if len(parts) >= 4 and parts[2] == "world":
         return parts[3]

@@ -130,9 +130,14 @@ def test_the_audit_does_not_book_as_gone_what_a_lossy_answer_left_out():
     from tests.conftest import wait_for
 
     w1, c_mine, c_other = keys.alive_world("w1"), keys.alive_claim("w1", "m"), keys.alive_claim("w2", "a1")
+    c_new = keys.alive_claim("w3", "a2")
     bus = _LossyBus(
         alive={w1, c_other},  # w1 and a1's claim of w2 are alive; the audited answers lose them
-        answers={keys.ALL_ALIVE_WORLDS: [], keys.ALL_ALIVE_OWNERS: [keys.alive_owner("m")], keys.ALL_CLAIMS: []},
+        answers={
+            keys.ALL_ALIVE_WORLDS: [keys.alive_world("w9")],  # w9 came, its event did not
+            keys.ALL_ALIVE_OWNERS: [keys.alive_owner("m")],
+            keys.ALL_CLAIMS: [c_new],  # lacks this owner's own claim: the whole answer is not used
+        },
     )
     d = AgentDaemon(bus, agent_id="m")  # type: ignore[arg-type]
     d.AUDIT_EVERY = 0.05
@@ -151,9 +156,9 @@ def test_the_audit_does_not_book_as_gone_what_a_lossy_answer_left_out():
         d.stop()
         th.join(5)
     view = d.book.view()
-    assert "w1" in view.worlds  # left out of the answer, found when asked alone: not gone
-    assert view.claimants("w2") == {"a1"}  # that answer lacked this owner's own claim: not used
-    assert "ghost" not in view.worlds and d.counters["liveliness_mended"] == 1
+    assert view.worlds == {"w1", "w9"}  # w1 left out of the answer but found alone; ghost gone; w9 came
+    assert view.claimants("w2") == {"a1"} and view.claimants("w3") == frozenset()  # that answer not used
+    assert d.counters["liveliness_mended"] == 2
 
 
 def test_a_client_audit_books_only_what_it_finds_alive():

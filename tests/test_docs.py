@@ -143,3 +143,18 @@ def test_results_page_has_no_number_outside_its_generated_blocks():
     assert numbers_outside_blocks("the error fell to 0.01 in 485 s") == ["0.01", "485 s"]
     for page in ("docs/results.md",):
         assert numbers_outside_blocks((ROOT / page).read_text()) == [], page
+
+
+def test_the_index_lists_every_page_once():
+    """docs/index.md names each top-level page in exactly one toctree (no glob repeating the named
+    pages, no page left for a reader to find by chance)."""
+    text = (ROOT / "docs" / "index.md").read_text()
+    entries = []
+    for body in re.findall(r"```\{toctree\}\n(.*?)```", text, re.S):
+        assert ":glob:" not in body, "a glob toctree lists the named pages again"
+        entries += [ln.strip() for ln in body.splitlines() if ln.strip() and not ln.startswith(":")]
+    assert len(entries) == len(set(entries)), sorted(e for e in entries if entries.count(e) > 1)
+    pages = {p.stem for p in (ROOT / "docs").glob("*.md")} - {"index"}
+    assert pages <= set(entries), f"pages missing from the index: {sorted(pages - set(entries))}"
+    for e in entries:
+        assert (ROOT / "docs" / f"{e}.md").exists(), e

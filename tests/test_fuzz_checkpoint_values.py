@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 from sensorimotor.agent.checkpoint import (
     MAX_CLOCK_SKEW,
     MAX_INFLATED_BYTES,
+    MAX_VERSION,
     Checkpoint,
     CheckpointError,
     _arrays,
@@ -63,6 +64,8 @@ def _good(**over) -> Checkpoint:
     [
         (dict(version=-1), "version"),
         (dict(version=2**60), "version"),
+        (dict(version=2**32 + 5), "version"),  # beyond the wire's uint32 embedding version
+        (dict(epoch=2**64), "epoch"),  # beyond the wire's uint64 lease epoch
         (dict(steps=-5), "steps"),
         (dict(saved_at=time.time() + 10 * MAX_CLOCK_SKEW), "dated"),
         (dict(saved_at=float("nan")), "dated"),
@@ -120,7 +123,7 @@ def test_mutated_checkpoints_are_restored_or_refused_with_a_reason(version, step
     except CheckpointError as e:
         assert str(e)
         return
-    assert 0 <= got.version < 2**53 and 0 <= got.steps < 2**53
+    assert 0 <= got.version <= MAX_VERSION and 0 <= got.steps < 2**53 and 0 <= got.epoch < 2**64
     assert np.isfinite(got.saved_at) and got.saved_at <= time.time() + MAX_CLOCK_SKEW
 
 

@@ -12,6 +12,7 @@ import pytest
 
 from sensorimotor.tools import report, reproduce
 from sensorimotor.tools.cli import main
+from sensorimotor.tools.experiments import shared
 
 VERDICTS = {report.MET, report.NOT_MET, report.NOT_COMPARABLE}
 
@@ -198,7 +199,7 @@ def _flaky_job(seed):
 
 
 def _flaky(runs, quick, workers, out):
-    res = reproduce._pool_map(_flaky_job, [(s,) for s in range(runs)], workers)
+    res = shared.pool_map(_flaky_job, [(s,) for s in range(runs)], workers)
     return {"markdown": repr(res), "cpu_seconds": 0.0}
 
 

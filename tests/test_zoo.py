@@ -137,15 +137,15 @@ def test_panda_reach_holds_its_target_and_starts_on_a_lattice_of_hand_positions(
 
 
 def test_panda_gym_start_up_noise_stays_off_stdout():
-    """panda-gym's PyBullet prints `argv[0]=...` from C when it connects; a command's stdout is its
-    own output (here one JSON line)."""
+    """panda-gym's PyBullet prints `argv[0]=...` from C when it connects; a command's output is its
+    own (here one JSON line), and that start-up line is shown nowhere."""
     pytest.importorskip("panda_gym")
     import json
     import subprocess
 
     cmd = [sys.executable, "-m", "sensorimotor.tools.experiments.gym_embed", "gym:panda_gym:PandaReach-v3"]
     out = subprocess.run([*cmd, "--steps", "50"], capture_output=True, text=True, timeout=120, check=True)
-    assert "argv[" in out.stderr and "argv[" not in out.stdout
+    assert "argv[" not in out.stderr and "argv[" not in out.stdout
     assert json.loads(out.stdout)["steps"] == 50
 
 

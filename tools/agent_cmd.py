@@ -9,14 +9,16 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from typing import Any
 
-from sensorimotor.agent.daemon import AgentDaemon
+from sensorimotor.agent.daemon import AgentDaemon, DuplicateAgent
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
 from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, program_kind
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.params import ParamError, quote, table_text
+from sensorimotor.tools.exit_guard import ExitGuard
 
 log = logging.getLogger("sme.agent")
 
@@ -172,12 +174,47 @@ def _worker_argv(args: argparse.Namespace, k: int, endpoint: str) -> list[str]:
     return argv
 
 
-def _watch_parent(pid: int, daemon: AgentDaemon) -> None:
-    """A worker stops when the agent that started it is gone (even after a kill -9)."""
-    while not daemon._stop.wait(0.5):
-        if os.getppid() != pid:
-            log.warning("worker %s: its agent (pid %d) is gone; stopping", daemon.owner_id, pid)
-            daemon.stop()
+WORKER_EXIT_GRACE = 1.0  # seconds a worker's clean stop gets after its agent died or a signal (then it ends)
+AGENT_EXIT_GRACE = 20.0  # the agent's, after a signal: its workers get 10 s before they are killed
+WORKER_UP_WAIT = 30.0  # seconds the agent waits for a worker's owner token before it calls it missing
+
+
+def _watch_workers(daemon: AgentDaemon, children: dict[str, subprocess.Popen], stop: threading.Event) -> None:
+    """Say which workers actually run: each one's owner token appearing (up) or its process ending
+    (with its exit code; its own error line says why), then once how many of them run."""
+    t0 = time.monotonic()
+    up: set[str] = set()
+    ended: dict[str, int] = {}
+    told = False
+    while not stop.wait(0.2):
+        owners = daemon.book.view().owners
+        for wid, c in children.items():
+            code = c.poll()
+            if code is not None and wid not in ended:
+                ended[wid] = code
+                up.discard(wid)
+                log.error(
+                    "worker %s exited with code %d (its error is logged above); agent %s runs with %d of %d workers",
+                    wid,
+                    code,
+                    daemon.agent_id,
+                    len(children) + 1 - len(ended),
+                    len(children) + 1,
+                )
+            elif code is None and wid in owners and wid not in up:
+                up.add(wid)
+        settled = len(up) + len(ended) == len(children)
+        if not told and (settled or time.monotonic() - t0 > WORKER_UP_WAIT):
+            told = True
+            missing = sorted(set(children) - up - set(ended))
+            log.info(
+                "agent %s: %d of %d workers running%s",
+                daemon.agent_id,
+                len(up) + 1,
+                len(children) + 1,
+                f" (not up after {WORKER_UP_WAIT:g} s: {', '.join(missing)})" if missing else "",
+            )
+        if len(ended) == len(children):
             return
 
 
@@ -205,6 +242,28 @@ def run_agent(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"sme agent: {e}", file=sys.stderr)
         return 2
+    who = f"agent {args.id}" if owner_id == args.id else f"worker {owner_id}"
+    # a worker watches its agent from the start: opening the session can take a while, and a worker
+    # whose agent is gone must not live on (see tools.exit_guard)
+    guard = ExitGuard(who, WORKER_EXIT_GRACE if args.parent_pid is not None else AGENT_EXIT_GRACE, args.parent_pid)
+    if args.parent_pid is not None:
+        guard.start()
+    try:
+        return _run_agent(args, guard, who, owner_id, workers, program_params)
+    finally:
+        if args.parent_pid is None:  # in-process callers get their wakeup fd back; a worker stays guarded
+            guard.close()  # to its last instruction (interpreter shutdown with a session whose router is gone)
+
+
+def _run_agent(
+    args: argparse.Namespace,
+    guard: ExitGuard,
+    who: str,
+    owner_id: str,
+    workers: int,
+    program_params: dict[str, dict[str, Any]],
+) -> int:
+    """`run_agent` once its arguments are checked: the bus, the daemon and its workers."""
     cfg = bus_config_from_args(args, "agent")
     endpoint = _worker_endpoint(cfg.listen) if cfg.mode == "router" else None
     if workers > 1 and endpoint is None:
@@ -216,7 +275,7 @@ def run_agent(args: argparse.Namespace) -> int:
     try:
         bus = Bus(cfg)
     except BusError as e:
-        log.error("%s", e)
+        log.error("%s: %s", who, e)
         return 2
     with bus:
         daemon = AgentDaemon(
@@ -234,38 +293,51 @@ def run_agent(args: argparse.Namespace) -> int:
             workers=tuple(f"{args.id}.w{k}" for k in range(1, workers)),
             all_obs=args.owner_id is None,  # a worker hears only the worlds it claims
         )
+        try:
+            daemon.check_unique()  # before any worker starts
+        except DuplicateAgent as e:
+            print(f"sme agent: {e}", file=sys.stderr)
+            return 1
         stop = threading.Event()
-        children: list[subprocess.Popen] = []
+        children: dict[str, subprocess.Popen] = {}
 
         def on_signal(signum, frame):  # noqa: ARG001
             daemon.stop()
             stop.set()
-            for c in children:  # the workers stop at the same time as this process
+            for c in children.values():  # the workers stop at the same time as this process
                 if c.poll() is None:
                     c.send_signal(signal.SIGINT)
 
         signal.signal(signal.SIGINT, on_signal)
         signal.signal(signal.SIGTERM, on_signal)
-        if args.parent_pid is not None:
-            threading.Thread(target=_watch_parent, args=(args.parent_pid, daemon), daemon=True).start()
-        children += [subprocess.Popen(_worker_argv(args, k, str(endpoint))) for k in range(1, workers)]
+        guard.stop = daemon.stop
+        guard.last_words = daemon.checkpoint
+        guard.watch_signals()
+        if args.parent_pid is None:
+            guard.start()
+        for k in range(1, workers):
+            children[f"{args.id}.w{k}"] = subprocess.Popen(_worker_argv(args, k, str(endpoint)))
         try:
             with daemon:
-                who = args.id if owner_id == args.id else f"{args.id} worker {owner_id}"
-                more = f", {workers} workers" if workers > 1 else ""
-                log.info("agent %s up (%s%s); waiting for worlds", who, cfg.describe(), more)
+                more = f", starting {workers - 1} more worker processes" if workers > 1 else ""
+                log.info("%s up (%s%s); waiting for worlds", who, cfg.describe(), more)
+                if children:
+                    threading.Thread(
+                        target=_watch_workers, args=(daemon, children, stop), name="watch-workers", daemon=True
+                    ).start()
                 daemon.run(args.seconds)
         finally:
-            for c in children:
+            stop.set()
+            for c in children.values():
                 if c.poll() is None:
                     c.send_signal(signal.SIGINT)
-            for c in children:
+            for c in children.values():
                 try:
                     c.wait(10)
                 except subprocess.TimeoutExpired:
                     c.kill()
                     c.wait()
-        log.info("agent %s stopped", args.id if owner_id == args.id else owner_id)
+        log.info("%s stopped", who)
     return 0
 
 

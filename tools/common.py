@@ -236,10 +236,21 @@ def format_embedding(e: Embedding) -> str:
         else f"T={sc.trustworthiness:.3f} C={sc.continuity:.3f} "
         f"Dm={sc.metric_dissimilarity:.3f} Dt={sc.topological_dissimilarity:.4f} "
     )
+    goal = e.metrics.get("goal_reached_fraction")
+    reached = "" if goal is None else f"goal={goal:.2f} "
     return (
         f"[{e.world_id}] embedding v{e.version:<3} {describe_trigger(e):<22} n={e.coordinates.shape[0]:<4} "
-        f"procrustes={err:<7} {field}eig=[{eig}] step={e.step}"
+        f"procrustes={err:<7} {field}{reached}eig=[{eig}] step={e.step}"
     )
+
+
+#: what the columns of `format_embedding` mean, for the demo's first lines and `sme watch --help`
+EMBEDDING_COLUMNS = (
+    "procrustes = error of the map against the world's truth (0 perfect, about 1 random); "
+    "T, C = trustworthiness, continuity of its neighbourhoods (1 best); Dm, Dt = metric and topological "
+    "dissimilarity (0 best); goal = fraction of the start states from which the greedy policy reached the goal; "
+    "eig = the largest MDS eigenvalues; step = the world step it was made at"
+)
 
 
 def format_event(e: AgentEvent) -> str:

@@ -1,17 +1,20 @@
 """`sme demo`: the agent daemon and one world in one command, with progress and an honest summary.
 
-Unbounded (no --seconds, no --steps) it runs 15 s and then, if the world has not been embedded yet
-and can be, goes on until its first embedding (at most 180 s): `sme demo --world retina` shows a
-map although the retina's first comes after 1,000 saccades. The summary says the first, best and
-final Procrustes error, whether the last versions are near the best, and, when the world was not
-embedded or cannot be scored, why and what to do (`tools.summary`). `--plot DIR` writes the final
-embedding as a PNG (`tools.plot`)."""
+Unbounded (no --seconds, no --steps) it runs 15 s and then on until the world's map holds (the
+last versions near the best, or one the program holds, at an error that is a map:
+`tools.summary.settled`; a world without truth: its first embedding), at most 180 s; stopped at that bound it says what the map would need
+at the run's pace. The summary says the first, best and final Procrustes error, whether the last
+versions are near the best, from how many start states the greedy policy reached the goal and,
+when the world was not embedded or cannot be scored, why and what to do (`tools.summary`).
+`--plot DIR` writes the final map in the truth's units beside the error and goal fraction per
+step as a PNG (`tools.plot`)."""
 
 from __future__ import annotations
 
 import argparse
 import signal
 import sys
+import textwrap
 import threading
 import time
 from typing import Any
@@ -20,13 +23,13 @@ from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.messages import AgentEvent, Embedding
 from sensorimotor.protocol.params import assignments
-from sensorimotor.tools.common import format_embedding, format_event, output_closed
-from sensorimotor.tools.summary import verdict
+from sensorimotor.tools.common import EMBEDDING_COLUMNS, format_embedding, format_event, output_closed
+from sensorimotor.tools.summary import settled, still_to_go, verdict
 from sensorimotor.worlds.node import WorldNode
 from sensorimotor.worlds.registry import WORLDS, make_world
 
 DEFAULT_SECONDS = 15.0  # an unbounded demo runs this long at least ...
-WAIT_FOR_FIRST = 180.0  # ... and, while the world has no embedding yet, at most this long
+MAX_SECONDS = 180.0  # ... and, while the world's map has not held yet, at most this long
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -36,8 +39,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Start the agent daemon (a zenoh router, loopback by default) and a world node connected to "
         "it, show each embedding version as it arrives, and print a summary: first, best and final error and "
         "whether the map held, or why the world was not embedded. Without --seconds or --steps it runs "
-        f"{DEFAULT_SECONDS:g} s, and longer (at most {WAIT_FOR_FIRST:g} s) until the world's first embedding; "
-        "Ctrl-C stops it.",
+        f"{DEFAULT_SECONDS:g} s, and longer (at most {MAX_SECONDS:g} s) until the world's map holds; "
+        "Ctrl-C stops it. Each embedding line: " + EMBEDDING_COLUMNS + ".",
     )
     p.add_argument("--world", default="gridworld", help="world to run: " + ", ".join(sorted(WORLDS)) + ", gym:ENV_ID")
     p.add_argument(
@@ -51,7 +54,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=None,
         metavar="S",
-        help=f"run exactly this long (default: {DEFAULT_SECONDS:g} s, and on until the first embedding)",
+        help=f"run exactly this long (default: {DEFAULT_SECONDS:g} s, and on until the map holds, at most "
+        f"{MAX_SECONDS:g} s)",
     )
     p.add_argument(
         "--steps", type=int, default=None, metavar="N", help="stop after this many world steps (and at most --seconds)"
@@ -61,8 +65,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--plot",
         default=None,
         metavar="DIR",
-        help="write the final embedding as DIR/<world>.png: truth, the map coloured by true position, "
-        "the eigenvalue spectrum",
+        help="write the final embedding as DIR/<world>.png: truth, the map aligned onto it in its units and "
+        "coloured by true position, the error and goal fraction per step, the eigenvalue spectrum",
     )
     add_bus_arguments(p, "agent")
     p.set_defaults(func=main_args, log_default=-1)  # quiet logs unless -v: the demo prints its own progress
@@ -86,7 +90,7 @@ def main_args(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     # bounded: exactly as asked; unbounded: DEFAULT_SECONDS, then on until the first embedding
     bounded = args.seconds is not None or args.steps is not None
-    seconds = args.seconds if args.seconds is not None else (WAIT_FOR_FIRST if args.steps else DEFAULT_SECONDS)
+    seconds = args.seconds if args.seconds is not None else (MAX_SECONDS if args.steps else DEFAULT_SECONDS)
 
     stop = threading.Event()
     broken_pipe = threading.Event()
@@ -104,6 +108,9 @@ def main_args(args: argparse.Namespace) -> int:
     def on_output(channel: str, msg: Any) -> None:
         stamp = f"{time.monotonic() - t0:6.1f}s "
         if isinstance(msg, Embedding):
+            if not embeddings:
+                legend = f"(columns: {EMBEDDING_COLUMNS})"
+                say("\n".join(textwrap.wrap(legend, 100, initial_indent=" " * 8, subsequent_indent=" " * 9)))
             embeddings.append(msg)
             say(stamp + format_embedding(msg))
         elif isinstance(msg, AgentEvent):
@@ -127,12 +134,13 @@ def main_args(args: argparse.Namespace) -> int:
         return 2
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    length = f"{seconds:g} s" if bounded else f"{seconds:g} s (longer until its first embedding)"
+    length = f"{seconds:g} s" if bounded else f"{seconds:g} s (longer until its map holds, at most {MAX_SECONDS:g} s)"
     say(
         f"sme demo: agent on {endpoint}{' (mutual TLS + access control)' if args.secure else ''}, world {wid!r} ({world.kind}), {length}; Ctrl-C stops"
     )
     spec = world.spec()
     told_wait = False
+    at_bound = False
     with agent_bus, world:
         daemon = AgentDaemon(agent_bus, seed=args.seed, on_output=on_output)
         daemon.start()
@@ -160,13 +168,17 @@ def main_args(args: argparse.Namespace) -> int:
                     can_embed = not any(
                         e.reason == "no_start_states" for e in events
                     )  # the retina embeds fields, not starts
-                    if bounded or embeddings or not can_embed or el >= WAIT_FOR_FIRST:
+                    if bounded or not can_embed or settled(embeddings, events):
+                        break
+                    if el >= MAX_SECONDS:
+                        at_bound = True
                         break
                     if not told_wait:
                         told_wait = True
+                        what = "its map to hold" if embeddings else "the first embedding"
                         say(
-                            f"{el:6.1f}s [{wid}] no embedding yet: waiting for the first "
-                            f"(at most {WAIT_FOR_FIRST:g} s; --seconds S bounds the run)"
+                            f"{el:6.1f}s [{wid}] going on until {what} "
+                            f"(at most {MAX_SECONDS:g} s; --seconds S bounds the run)"
                         )
                 if el >= next_tick:
                     next_tick += 5.0
@@ -195,11 +207,17 @@ def main_args(args: argparse.Namespace) -> int:
     result = verdict(embeddings, events, has_truth=final_truth is not None, n_starts=spec.n_starts, seconds=el)
     for line in result.lines:
         print(line)
+    if at_bound:
+        pace = node.stats.steps / max(el, 1e-9)
+        print(
+            f"  stopped at the demo's {MAX_SECONDS:g} s bound before the map held: "
+            f"{still_to_go(embeddings, pace)}; `--seconds S` runs longer"
+        )
     if args.plot and embeddings:
         from sensorimotor.tools.plot import plot_embedding
 
-        last = [e for e in embeddings if e.trigger != "policy_map"][-1]
-        drawn = plot_embedding(last, final_truth, args.plot)
+        maps = [e for e in embeddings if e.trigger != "policy_map"]
+        drawn = plot_embedding(maps[-1], final_truth, args.plot, history=maps)
         how = "coloured by true position" if drawn.coloured_by_truth else "no truth to colour by"
-        print(f"  wrote {drawn.path}: embedding v{last.version}, {drawn.n_points} points, {how}")
+        print(f"  wrote {drawn.path}: embedding v{maps[-1].version}, {drawn.n_points} points, {how}")
     return 0 if result.embedded else 1

@@ -432,7 +432,8 @@ def main_args(args: argparse.Namespace) -> int:
             latest = {e.world_id: e for e in res.embeddings if e.trigger != "policy_map"}
             for wid, e in sorted(latest.items()):
                 link = res.links.get(wid)
-                drawn = plot_embedding(e, link.truth if link is not None else None, args.plot)
+                versions = [x for x in res.embeddings if x.world_id == wid and x.trigger != "policy_map"]
+                drawn = plot_embedding(e, link.truth if link is not None else None, args.plot, history=versions)
                 how = "coloured by true position" if drawn.coloured_by_truth else "no truth to colour by"
                 print(
                     f"sme replay --offline: wrote {drawn.path}: embedding v{e.version}, {drawn.n_points} points, {how}",

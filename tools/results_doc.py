@@ -30,6 +30,7 @@ PAGES = (
     "docs/reproduce.md",
     "docs/commands/bench.md",
     "docs/arm.md",
+    "docs/zoo.md",
 )
 
 
@@ -49,11 +50,16 @@ def reproduce_table(src: Source, text: str) -> str:
 
 
 def demo_output(src: Source, text: str) -> str:
-    """The demo's stdout: its first lines, the last embeddings and the summary."""
+    """The demo's stdout: its first lines up to the second embedding (the column legend included),
+    the last embeddings and the summary."""
     lines = text.rstrip("\n").split("\n")
     cut = lines.index("summary") if "summary" in lines else len(lines)
     progress = [ln for ln in lines[:cut] if ln.strip()]
-    shown = progress[:4] + (["   ..."] if len(progress) > 7 else []) + progress[max(4, len(progress) - 3) :]
+    firsts = [i for i, ln in enumerate(progress) if "] embedding v" in ln][:2]
+    head = firsts[-1] + 1 if firsts else 4
+    shown = (
+        progress[:head] + (["   ..."] if len(progress) > head + 3 else []) + progress[max(head, len(progress) - 3) :]
+    )
     return "```text\n$ " + src.command + "\n" + "\n".join(shown + [""] + lines[cut:]) + "\n```"
 
 
@@ -190,6 +196,44 @@ SOURCES: dict[str, Source] = {
         command_output,
     ),
     "bench-world-arm": Source("sme bench world --world arm", "results/bench-world-arm/output.txt", command_output),
+    "zoo-defaults": Source(
+        "sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world MiniGrid",
+        "results/bench-zoo-defaults/runs.jsonl",
+        jsonl_table(
+            (
+                ("world (`--world` names it)", "world"),
+                ("learner", "learner"),
+                ("final error", "final_error"),
+                ("best", "best_error"),
+                ("trustworthiness", "trustworthiness"),
+                ("goal reached", "goal_reached_fraction"),
+                ("optimal policy: goal", "optimal_goal_fraction"),
+                ("optimal policy: error", "optimal_error"),
+                ("steps to 1.5x final", "steps_to_1.5x_final"),
+                ("steps/s", "steps_per_second"),
+                ("PCA", "pca_error"),
+                ("Isomap", "isomap_error"),
+                ("worst after convergence", "worst_ratio"),
+                ("false alarms", "drops"),
+            ),
+            keep=lambda r: bool(r.get("summary")),
+        ),
+    ),
+    "zoo-defaults-short": Source(
+        "sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world MiniGrid",
+        "results/bench-zoo-defaults/runs.jsonl",
+        jsonl_table(
+            (
+                ("world", "world"),
+                ("learner", "learner"),
+                ("final error", "final_error"),
+                ("goal reached", "goal_reached_fraction"),
+                ("optimal policy's goal", "optimal_goal_fraction"),
+                ("optimal policy's error", "optimal_error"),
+            ),
+            keep=lambda r: bool(r.get("summary")),
+        ),
+    ),
 }
 SOURCES["detectors-quick"] = Source(
     "sme bench detectors --worlds gridworld,retina,vergence,mountaincar --quick --out FILE.md",

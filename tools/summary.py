@@ -128,11 +128,22 @@ def verdict(
         f"best {best:.4f} (v{vb}), final {final:.4f} (v{vf})",
     ]
     k = len(tail)
-    if k == 1:
+    span = f"{min(tail):.4f}-{max(tail):.4f}"
+    kept = program_holds(embeddings, events) and near(final, best)
+    if (k > 1 and near_best) or kept:
+        agree = (
+            f"the last {k} versions ({span}) agree"
+            if k > 1 and near_best
+            else "the program holds this version (it publishes another only for a better policy or after a change)"
+        )
+        if final > POOR:
+            lines.append(f"  {agree}, but at this error there is no map to hold yet")
+        elif k > 1 and near_best:
+            lines.append(f"  the last {k} versions ({span}) are near the best (within {NEAR_FACTOR:g}x): the map held")
+        else:
+            lines.append(f"  {agree}: the map held")
+    elif k == 1:
         lines.append("  one version only: too early to say whether the map holds; run longer to see it settle")
-    elif near_best:
-        span = f"{min(tail):.4f}-{max(tail):.4f}"
-        lines.append(f"  the last {k} versions ({span}) are near the best (within {NEAR_FACTOR:g}x): the map held")
     elif near(final, best):
         lines.append(
             "  the error was still falling at the end (the final version is at or near the best): "
@@ -141,6 +152,10 @@ def verdict(
     else:
         lines.append(f"  the final version is {final / max(best, 1e-12):.1f}x the best (v{vb}): the map did not hold")
     goal = last.metrics.get("goal_reached_fraction")
+    if goal is not None:
+        lines.append(
+            f"  the greedy policy reached the goal from {goal:.0%} of the {n} start states of the final version"
+        )
     if final > POOR:
         why = "this is not a map of the world"
         if goal is not None and goal == 0:
@@ -153,3 +168,59 @@ def verdict(
     elif best < first and near(final, best):
         lines.append(f"  the error fell from {first:.4f} (v{v1}) to {final:.4f} as the agent learned")
     return RunVerdict(tuple(lines), True, first, best, final, near_best)
+
+
+def program_holds(embeddings: Sequence[Embedding], events: Sequence[AgentEvent] = ()) -> bool:
+    """Whether the program says it holds its last version: the embedding is of a *watched* policy
+    (``watched`` metric 1: a new version comes only with a better policy), or a ``settled`` event
+    came at or after it (a stochastic world's policy that newer ones did not beat)."""
+    embeddings = [e for e in embeddings if e.trigger != "policy_map"]
+    if not embeddings:
+        return False
+    last = embeddings[-1]
+    return last.metrics.get("watched") == 1.0 or any(ev.reason == "settled" and ev.step >= last.step for ev in events)
+
+
+def settled(embeddings: Sequence[Embedding], events: Sequence[AgentEvent] = ()) -> bool:
+    """Whether a run has shown what it can: a world without truth once embedded; a scored one when
+    its map held at an error of at most `POOR`: the last `LAST` versions near the best, or the
+    program holding a last version near the best (`program_holds`)."""
+    embeddings = [e for e in embeddings if e.trigger != "policy_map"]
+    if not embeddings:
+        return False
+    scored = _scored(embeddings)
+    if not scored:
+        return True
+    tail = [err for _, err in scored[-LAST:]]
+    best = min(err for _, err in scored)
+    if tail[-1] > POOR:
+        return False
+    if len(tail) == LAST and all(near(err, best) for err in tail):
+        return True
+    return program_holds(embeddings, events) and near(tail[-1], best)
+
+
+def still_to_go(embeddings: Sequence[Embedding], steps_per_second: float) -> str:
+    """What a run stopped at its bound before its map held would need, from its own pace: the steps
+    (and seconds at `steps_per_second`) until the error falls below `POOR`, extrapolating the fall
+    from the first scored version to the best one (log error linear in steps); or why no estimate."""
+    pts = [
+        (int(e.step), float(e.procrustes_error))
+        for e in embeddings
+        if e.trigger != "policy_map" and e.procrustes_error is not None and math.isfinite(e.procrustes_error)
+    ]
+    pts = [(s, err) for s, err in pts if err > 0]
+    if len(pts) < 2:
+        return "fewer than two scored versions, so no pace to go by"
+    (s0, e0), (sb, eb) = pts[0], min(pts, key=lambda p: p[1])
+    if eb <= POOR:
+        return "the error was below the bar once: a longer run should let the map settle"
+    if sb <= s0 or eb >= e0:
+        return f"the error has not fallen since the first version ({e0:.4f}), so no estimate from this run"
+    rate = math.log(eb / e0) / (sb - s0)  # per step, negative
+    more = max(0.0, math.log(POOR / eb) / rate - (pts[-1][0] - sb))
+    secs = f", about {more / steps_per_second:,.0f} s more at this run's pace" if steps_per_second > 0 else ""
+    return (
+        f"at the pace from v1 to the best ({e0:.4f} -> {eb:.4f} in {sb - s0:,} steps), about {more:,.0f} more "
+        f"steps to an error below {POOR:g}{secs}"
+    )

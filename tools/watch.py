@@ -14,6 +14,7 @@ from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_conf
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import AgentEvent, Embedding
 from sensorimotor.tools.common import (
+    EMBEDDING_COLUMNS,
     EXIT_INTERRUPTED,
     embedding_dict,
     event_dict,
@@ -30,9 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "watch",
         help="print embedding versions and agent events as they arrive",
-        description="Subscribe to the agent's embeddings and events and print them. Waits for "
+        description="Subscribe to the agent's embeddings and events and print them, one line each. Waits for "
         "the agent if it is not up yet. Exit status 1 if --timeout passes before --count "
-        "embeddings arrived (130 if Ctrl-C comes first).",
+        "embeddings arrived (130 if Ctrl-C comes first). Each embedding line: " + EMBEDDING_COLUMNS + ".",
     )
     p.add_argument(
         "--json",

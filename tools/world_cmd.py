@@ -9,8 +9,9 @@ import sys
 
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.params import ParamError, assignments, table_text
+from sensorimotor.worlds.names import GYM_PREFIX
 from sensorimotor.worlds.node import WorldNode
-from sensorimotor.worlds.registry import GYM_PREFIX, WORLDS, make_world, world_kind
+from sensorimotor.worlds.registry import WORLDS, make_world, world_kind
 
 log = logging.getLogger("sme.world")
 
@@ -22,7 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Serve a world on the bus in lockstep: publish observation k, wait for the "
         "agent's action k (resend after --resend seconds, then keep waiting). The agent "
         "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ", and gym:ENV_ID for any "
-        "Gymnasium environment with discrete actions (its keyword arguments as --param k=v). "
+        "Gymnasium environment (gym:module:ENV_ID imports module first, from the current folder too; the "
+        "environment's keyword arguments as --param k=v). "
         "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.",
     )
     p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)) + ", or gym:ENV_ID")

@@ -229,7 +229,7 @@ class ArmWorld(World):
     Examples
     --------
     >>> import numpy as np
-    >>> with ArmWorld(seed=0, lattice=3) as w:  # doctest: +SKIP
+    >>> with ArmWorld(seed=0, lattice=3) as w:
     ...     r = w.reset(start=0)
     ...     r = w.step(np.array([0.0]))  # first moving joint +step
     """

@@ -7,12 +7,12 @@ from typing import Any
 import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
-from sensorimotor.worlds.quiet import stdout_to_stderr
+from sensorimotor.worlds.quiet import pybullet_quiet
 
 
 def direct_client() -> BulletClient:
-    """A headless (DIRECT) PyBullet client, its start-up noise kept off stdout."""
-    with stdout_to_stderr():
+    """A headless (DIRECT) PyBullet client, without its start-up line (``argv[0]=``)."""
+    with pybullet_quiet():
         return BulletClient(connection_mode=p.DIRECT)
 
 

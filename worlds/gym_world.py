@@ -61,8 +61,8 @@ from sensorimotor.protocol.messages import ActionSpace, Control, GoalRule, Senso
 from sensorimotor.protocol.params import ParamError, _scalar, option, parse, suggest, table_text, unknown_name
 from sensorimotor.worlds.base import StepResult, World
 from sensorimotor.worlds.body_changes import hook as perturb_hook
-from sensorimotor.worlds.quiet import stdout_to_stderr
-from sensorimotor.worlds.registry import GYM_PREFIX
+from sensorimotor.worlds.names import GYM_PREFIX, import_user_module
+from sensorimotor.worlds.quiet import pybullet_quiet
 
 log = logging.getLogger("sme.world")
 
@@ -162,7 +162,8 @@ def env_id_of(name: str) -> str:
     module, sep, rest = env_id.partition(":")
     if sep and rest:
         try:
-            importlib.import_module(module)
+            with pybullet_quiet():
+                import_user_module(module)
         except ImportError as e:
             raise ParamError(f"gym:{env_id}: cannot import {module!r}, which should register {rest!r}: {e}") from None
         return rest
@@ -176,7 +177,8 @@ def _import_family(env_id: str) -> None:
     for prefix, module in FAMILY_PACKAGES.items():
         if env_id.startswith(prefix):
             try:
-                importlib.import_module(module)
+                with pybullet_quiet():
+                    importlib.import_module(module)
             except ImportError:
                 pass
 
@@ -446,7 +448,7 @@ class GymWorld(World):
                 make_kw.setdefault("render_width", prm.pixels)
                 make_kw.setdefault("render_height", prm.pixels)
         try:
-            with stdout_to_stderr():  # C start-up noise (panda-gym's PyBullet: argv[0]=...) is not our output
+            with pybullet_quiet():  # panda-gym's PyBullet start-up lines are no output of ours
                 self.env = gym.make(env_id, max_episode_steps=self.max_episode_steps, **make_kw)
         except TypeError as e:  # a keyword the constructor refused after all
             raise ParamError(f"gym:{env_id}: {e}") from None

@@ -126,7 +126,7 @@ class ObjectPoseWorld(World):
     Examples
     --------
     >>> import numpy as np
-    >>> with ObjectPoseWorld(seed=0, half_range=1) as w:  # doctest: +SKIP
+    >>> with ObjectPoseWorld(seed=0, half_range=1) as w:
     ...     r = w.reset(start=0)
     ...     r = w.step(np.array([2.0]))  # yaw + pi/16
     """

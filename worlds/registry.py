@@ -17,6 +17,8 @@ from typing import Any, Protocol
 
 from sensorimotor.protocol.params import ParamError, parse, unknown_name
 from sensorimotor.worlds.base import World
+from sensorimotor.worlds.names import GYM_PREFIX, import_user_module
+from sensorimotor.worlds.quiet import pybullet_quiet
 
 
 class WorldClass(Protocol):
@@ -40,7 +42,8 @@ class WorldKind:
     absolute: bool = False  # `module` is a full import path (a world from another package)
 
     def _module(self) -> Any:
-        return importlib.import_module(self.module if self.absolute else f"sensorimotor.worlds.{self.module}")
+        with pybullet_quiet():  # the PyBullet worlds: its import line is no output of ours
+            return importlib.import_module(self.module if self.absolute else f"sensorimotor.worlds.{self.module}")
 
     def world_class(self) -> WorldClass:
         """Import the world's module and return its World class."""
@@ -83,7 +86,6 @@ WORLDS: dict[str, WorldKind] = {
 }
 
 
-GYM_PREFIX = "gym:"
 #: the entry-point group through which installed packages offer World subclasses by name
 ENTRY_POINT_GROUP = "sensorimotor.worlds"
 
@@ -103,7 +105,7 @@ def _outside_kind(name: str) -> WorldKind | None:
     if not module or not cls:
         raise ParamError(f"world {name!r}: expected package.module:Class")
     try:
-        mod = importlib.import_module(module)
+        mod = import_user_module(module)
     except ImportError as e:
         raise ParamError(f"world {name!r}: cannot import {module!r}: {e}") from None
     klass = getattr(mod, cls, None)

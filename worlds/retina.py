@@ -104,7 +104,7 @@ class RetinaWorld(World):
     Examples
     --------
     >>> import numpy as np
-    >>> with RetinaWorld(seed=0) as w:  # doctest: +SKIP
+    >>> with RetinaWorld(seed=0) as w:
     ...     r = w.reset()
     ...     r = w.step(np.array([2.0, -1.0]))  # pan 2 degrees right, tilt 1 down
     ...     reward = r.reward

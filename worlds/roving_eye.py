@@ -138,10 +138,10 @@ class RovingEyeWorld(World):
     Examples
     --------
     >>> import numpy as np
-    >>> w = RovingEyeWorld(seed=0, n_starts=20)  # doctest: +SKIP
-    >>> r = w.reset(start=0)  # doctest: +SKIP
-    >>> r = w.step(w.goal - w.starts[0])  # doctest: +SKIP
-    >>> round(r.reward, 3)  # doctest: +SKIP
+    >>> w = RovingEyeWorld(seed=0, n_starts=20)
+    >>> r = w.reset(start=0)
+    >>> r = w.step(w.goal - w.starts[0])
+    >>> round(r.reward, 3)
     1.0
     """
 

@@ -110,7 +110,7 @@ class VergenceWorld(World):
     Examples
     --------
     >>> import numpy as np
-    >>> with VergenceWorld(seed=0, n_starts=4) as w:  # doctest: +SKIP
+    >>> with VergenceWorld(seed=0, n_starts=4) as w:
     ...     r = w.reset(start=0)
     ...     r = w.step(np.array([0.0]))  # converge one step
     """

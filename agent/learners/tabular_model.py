@@ -125,10 +125,12 @@ class TabularModel:
         self._next: dict[tuple[int, int], int] = {}  # (state * A + action, next state) -> count
         self._likely: dict[int, int] = {}  # state * A + action -> its most frequent next state that goes on
         self._path: list[tuple[int, int]] = []  # (action, the state it is taken in) to the nearest untried
+        self._exhausted = False  # no untried action is reachable (until a new outcome or state is met)
         self.q = np.zeros((S, A))
         self.q_explore = np.ones((S, A))
         self.plans = 0
         self._path = []
+        self._exhausted = False
 
     @property
     def n_transitions(self) -> int:
@@ -137,6 +139,7 @@ class TabularModel:
     def set_stochastic(self, stochastic: bool) -> None:
         """A stochastic world asks for more tries before an action's outcomes are trusted."""
         self.known = self.known_stochastic if stochastic else self.known_deterministic
+        self._exhausted = False
 
     def learn_one(self, s: int, a: int, s_next: int | None, outcome: str) -> bool:
         """Count one transition: (s, a) led to `s_next` (the episode goes on, or was cut by a time
@@ -152,7 +155,10 @@ class TabularModel:
                 raise ValueError("a transition that goes on needs its next state")
             sa = s * self.n_actions + a
             key = (sa, int(s_next))
-            self._next[key] = n = self._next.get(key, 0) + 1
+            n = self._next.get(key, 0) + 1
+            if n == 1:
+                self._exhausted = False  # a new way, maybe to a state with untried actions
+            self._next[key] = n
             best = self._likely.get(sa)
             if best is None or best != s_next and n > self._next[(sa, best)]:
                 self._likely[sa] = int(s_next)
@@ -176,8 +182,9 @@ class TabularModel:
         if todo.size:
             self._path = []
             return int(todo[self.rng.integers(todo.size)])
-        if not self._path or self._path[0][1] != s:
+        if (not self._path or self._path[0][1] != s) and not self._exhausted:
             self._path = self._way_to_untried(s)
+            self._exhausted = not self._path
         if self._path:
             return self._path.pop(0)[0]
         if self.rng.random() < self.epsilon:
@@ -243,6 +250,7 @@ class TabularModel:
             "plans": self.plans,
             "known": self.known,
             "path": [list(p) for p in self._path],
+            "exhausted": self._exhausted,
             "rng": rng_state(self.rng),
         }
 
@@ -261,6 +269,7 @@ class TabularModel:
             if best is None or n > self._next[(sa, best)]:
                 self._likely[sa] = nxt
         self._path = [(int(a), int(u)) for a, u in state.get("path", [])]
+        self._exhausted = bool(state.get("exhausted", False))
         self.q = np.asarray(state["q"], dtype=np.float64).reshape(shape)
         self.q_explore = np.asarray(state["q_explore"], dtype=np.float64).reshape(shape)
         self.plans = int(state["plans"])

@@ -79,427 +79,28 @@ stochastic world that settles below `watch_after`: the settled policy's map, pub
 from __future__ import annotations
 
 import hashlib
-import itertools
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
-from sensorimotor.agent.embedding import classical_mds, trace_distances
-from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
-from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations, frame_trace
+from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations
 from sensorimotor.agent.learners.base import TableLearner
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
+from sensorimotor.agent.learners.lspi_features import RBFFeatures, basis_state, iterate_job, set_basis
 from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
-from sensorimotor.agent.learners.motor_map import MotorMap, fit_motor_map
+from sensorimotor.agent.learners.motor_map import MotorMap
 from sensorimotor.agent.learners.registry import outside_learners, table_learner_class
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.learners.tabular_model import TabularModel
 from sensorimotor.agent.programs.acceptance import Score, Verdict, compare, compare_ends, end_disparity, sweep_score
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.agent.programs.generic_jobs import action_table, embed_job, motor_job
+from sensorimotor.agent.programs.generic_params import LEARNERS, OWN_LEARNERS, GenericProgramParams
 from sensorimotor.agent.programs.goal import failed, reached
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
-from sensorimotor.protocol.params import option, parse
-
-#: the learners the program drives itself; any table learner of `agent.learners.registry` too
-LEARNERS = ("auto", "model", "tabular", "lspi", "sarsa", "planner")
-OWN_LEARNERS = ("tabular", "lspi", "sarsa", "planner")
-
-
-@dataclass(frozen=True)
-class GenericProgramParams:
-    """Hyperparameters of the generic program (ch. 6 recipe)."""
-
-    learner: str = option(
-        "auto",
-        "auto (by the observation: see the module docstring), model (a counted model of a table, planned on), "
-        "tabular (LSPI over a table), lspi, sarsa or planner, or the name of a table learner an installed "
-        "package declares (entry-point group sensorimotor.learners)",
-    )
-    samples_per_iteration: int = option(500, "tabular/lspi: new random-action samples between policy iterations", min=1)
-    lspi_iterations: int = option(8, "at most this many LSPI iterations after each exploration phase", min=1)
-    max_trace: int = option(
-        0,
-        "longest greedy trace recorded from a start state (0: the world's episode limit, at most 250; else 60)",
-        min=0,
-    )
-    gamma: float = option(0.9, "LSPI discount", min=0.0, max=0.999)
-    ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
-    dims: int = option(
-        0, "embedding dimensions (0: the truth's, as the world declares it in `truth_dims`, else 2)", min=0
-    )
-    components: int = option(8, "PCA components of the observations", min=1)
-    centres: int = option(60, "radial basis functions in the PCA space", min=1)
-    width: float = option(1.0, "RBF width, in units of the median spacing of the centres", min=0.01)
-    projection: int = option(256, "observations longer than this are randomly projected to it first", min=8)
-    reservoir: int = option(1000, "observations kept (a uniform sample of all seen) to fit PCA and centres", min=10)
-    max_samples: int = option(5000, "LSPI samples kept (the newest)", min=10)
-    max_categories: int = option(4096, "an integer sensor with at most this many values is a state id", min=2)
-    symbol_values: int = option(
-        32, "integer sensors with at most this many values each are tabulated by distinct observation", min=2
-    )
-    table_size: int = option(2048, "distinct observations a table holds (later ones share its last row)", min=2)
-    model_gamma: float = option(
-        0.99,
-        "model learner: discount of the plan (the values are the discounted chance of reaching the goal: a long "
-        "horizon takes the safe way round in a stochastic world, and the shortest way in a deterministic one)",
-        min=0.5,
-        max=0.9999,
-    )
-    model_known: int = option(
-        30, "model learner, stochastic world: tries of an action before its counted outcomes are trusted", min=1
-    )
-    model_epsilon: float = option(
-        0.05, "model learner: random-action rate while exploring, once no action nearby is untried", min=0.0, max=1.0
-    )
-    model_every: int = option(
-        50, "model learner: transitions between plans while new actions become known (exploration)", min=1
-    )
-    sarsa_max_dims: int = option(
-        6, "learner=auto: continuous observations of at most this many values use Sarsa", min=1
-    )
-    tiles: int = option(8, "Sarsa: tiles per dimension and tiling", min=1)
-    tilings: int = option(8, "Sarsa: offset tilings", min=1)
-    memory: int = option(1 << 18, "Sarsa: weights per action; more tiles than this are hashed", min=64)
-    alpha: float = option(0.3, "Sarsa step size (shared by the tilings)", min=1e-6, max=1.0)
-    lam: float = option(0.9, "Sarsa trace decay lambda", min=0.0, max=1.0)
-    sarsa_gamma: float = option(
-        0.99, "Sarsa discount (a failure is worth -1 / (1 - gamma), as never arriving)", min=0.5, max=0.9999
-    )
-    epsilon: float = option(
-        0.0, "Sarsa exploration rate (optimistic initial values explore without it)", min=0.0, max=1.0
-    )
-    embed_every: int = option(5000, "Sarsa: learning steps between embedding sweeps", min=1)
-    sarsa_warmup: int = option(1000, "Sarsa: random steps first, to measure each value's range for the tiles", min=0)
-    planner_max_dims: int = option(
-        4, "learner=auto: continuous observations of at most this many values with box actions of 2+ dims plan", min=1
-    )
-    planner_grid: int = option(
-        0, "planner: grid nodes per dimension (0: 16, fewer when 16 per value would pass 4096 nodes)", min=0
-    )
-    planner_every: int = option(250, "planner: transitions between plans (value iteration over the model)", min=1)
-    planner_epsilon: float = option(0.05, "planner: random-action rate while learning", min=0.0, max=1.0)
-    planner_effort: float = option(
-        0.3,
-        "planner: cost of the largest action, in steps (of two actions whose cost-to-go differs by less, the "
-        "smaller: the plan's interpolated values are that uncertain, and traces become a function of the start)",
-        min=0.0,
-    )
-    motor_warmup: int = option(
-        3000,
-        "planner over camera frames: random moves whose transitions fit the motor coordinates (the planner's "
-        "state: see agent.learners.motor_map)",
-        min=10,
-    )
-    motor_components: int = option(
-        32, "planner over camera frames: principal components of the frames the motor map is built on", min=1
-    )
-    motor_scale: float = option(
-        0.0,
-        "planner over camera frames: the warm-up's random moves span this fraction of each bound (0: "
-        "action_scale; larger moves change a frame by more pixels, so the map is fitted on clearer differences)",
-        min=0.0,
-        max=1.0,
-    )
-    action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
-    action_scale: float = option(
-        1.0,
-        "box actions: the discretised values span this fraction of each bound, about the box's middle "
-        "(smaller moves: finer traces, for a body that follows small moves more faithfully)",
-        min=0.01,
-        max=1.0,
-    )
-    distance: str = option(
-        "padded",
-        "box actions: padded sum (Eq 3.1) or dtw between the continuous traces, or net: the distance "
-        "between their sums (the net move commanded, for bodies whose moves add up, such as a hand)",
-        choices=("padded", "dtw", "net"),
-    )
-    rank: str = option(
-        "auto",
-        "once the policy is watched, a newer policy is published when it is better by: more goals, "
-        "then shorter traces (goals), or a lower end disparity (ends, the planner: its traces end "
-        "more nearly where a similarity of their starts puts them, which a net-move map needs); "
-        "auto: ends for the planner with distance=net in a deterministic world, else goals",
-        choices=("auto", "goals", "ends"),
-    )
-    dtw_penalty: float = option(
-        1.0, "distance=dtw: cost of each repeated step (keeps trace length in the distance)", min=0.0
-    )
-    samples: int = option(
-        0,
-        "traces per start state once the world is seen to be stochastic (every estimator: the goal fraction "
-        "that ranks and watches policies is estimated from all of them); 0: for the mean_trace estimator "
-        "768 traces a sweep, 8 to 64 per start (a mean trace's noise falls with its samples), else 8",
-        min=0,
-        max=100,
-    )
-    estimator: str = option(
-        "auto",
-        "stochastic worlds: mode trace or mean pairwise distance (ch. 9.4), mean_trace (the padded sum "
-        "between the starts' mean traces, a distance between trace distributions), or plain (the first "
-        "sampled trace of each start, as in a deterministic world: the figure the estimators are "
-        "compared with); auto: mean_trace for discrete actions (the best map of the slippery lake, "
-        "docs/zoo.md), mode for box actions",
-        choices=("auto", "mode", "mean", "mean_trace", "plain"),
-    )
-    stochastic_gamma: float = option(
-        0.99,
-        "tabular learner in a stochastic world: LSPI discount (a long horizon: the safe way round, not the "
-        "short risky one)",
-        min=0.0,
-        max=0.999,
-    )
-    stochastic_samples: int = option(
-        50_000, "tabular learner in a stochastic world: LSPI samples kept (the average of many outcomes)", min=10
-    )
-    frames: str = option(
-        "auto",
-        "discrete actions: compare traces in the frame of the start when some actions are rotations "
-        "(auto: found from experience, see agent.embedding.rotation_frames), or as they are (off)",
-        choices=("auto", "off"),
-    )
-    watch_after: float = option(
-        0.9,
-        "a sweep that reaches the goal from this fraction of starts makes the policy accepted (watched)",
-        min=0.0,
-        max=1.0,
-    )
-    settle: int = option(
-        3,
-        "stochastic worlds: a policy still the accepted one after this many newer policies, none better "
-        "beyond the noise of the sampled goal fractions, has converged and is watched (where no policy "
-        "reaches `watch_after` of the starts: FrozenLake's slippery ice, the best from 3 in 4)",
-        min=1,
-    )
-    learn_lag: int = option(
-        75,
-        "acts between the start of a background learning job (feature refit + LSPI, MDS) and the act "
-        "that uses it (short: the samples taken meanwhile come from the previous policy)",
-        min=1,
-    )
-
-
-def _action_table(spec: WorldSpec, levels: int, scale: float = 1.0) -> np.ndarray:
-    """The action values the program chooses among: (n_actions, dims); box values span `scale`
-    of each bound about the box's middle."""
-    a = spec.action_space
-    if a.discrete:
-        return np.arange(a.n, dtype=np.float64)[:, None]
-    if len(a.low) > 4:
-        raise SpecMismatch(f"generic program: {len(a.low)} action dimensions; at most 4 are discretised")
-    grids = [
-        (lo + hi) / 2 + scale * (np.linspace(lo, hi, levels) - (lo + hi) / 2)
-        for lo, hi in zip(a.low, a.high, strict=True)
-    ]
-    return np.array(list(itertools.product(*grids)), dtype=np.float64)
-
-
-class _RBFFeatures:
-    """LSPI basis over observation ids: id -> stored (projected) observation -> PCA -> RBFs, one
-    block of `centres + 1` features per action. Refitted between policy iterations."""
-
-    def __init__(self, store: np.ndarray, n_actions: int, n_centres: int) -> None:
-        self.store = store
-        self.n_actions = n_actions
-        self.m = n_centres + 1
-        self.mean = np.zeros(store.shape[1])
-        self.axes = np.zeros((store.shape[1], 0))
-        self.scale = np.ones(0)
-        self.centres = np.zeros((0, 0))
-        self.width = 1.0
-        self._cache = np.zeros((store.shape[0], self.m))  # features of stored rows under this fit
-        self._cached = np.zeros(store.shape[0], dtype=bool)
-
-    @property
-    def k(self) -> int:
-        return self.m * self.n_actions
-
-    def forget(self, rows: np.ndarray | int | slice) -> None:
-        """Stored rows were overwritten: their cached features are stale."""
-        self._cached[rows] = False
-
-    def fit(self, X: np.ndarray, components: int, n_centres: int, width: float) -> None:
-        """PCA of the sample `X` (rows), then RBF centres by farthest-point sampling in its scores,
-        starting from the point nearest the mean (deterministic given the sample)."""
-        self._cached[:] = False
-        self.mean = X.mean(axis=0)
-        Xc = X - self.mean
-        _, s, vt = np.linalg.svd(Xc, full_matrices=False)
-        c = max(1, min(components, int((s > 1e-9 * max(s[0], 1e-300)).sum()) if s.size else 1))
-        self.axes = np.ascontiguousarray(vt[:c].T)  # the layout a restored copy has: same rounding
-        Z = Xc @ self.axes
-        self.scale = Z.std(axis=0) + 1e-12
-        Z = Z / self.scale
-        n = min(n_centres, Z.shape[0])
-        chosen = [int(np.linalg.norm(Z, axis=1).argmin())]
-        dist = np.linalg.norm(Z - Z[chosen[0]], axis=1)
-        for _ in range(1, n):
-            i = int(dist.argmax())
-            chosen.append(i)
-            dist = np.minimum(dist, np.linalg.norm(Z - Z[i], axis=1))
-        centres = Z[chosen]
-        if centres.shape[0] < n_centres:  # fewer distinct points than centres: repeat (features stay finite)
-            centres = np.resize(centres, (n_centres, centres.shape[1]))
-        self.centres = centres
-        d = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=2)
-        d[np.diag_indices_from(d)] = np.inf
-        nearest = d.min(axis=1)
-        spacing = float(np.median(nearest[np.isfinite(nearest) & (nearest > 0)])) if np.any(nearest > 0) else 1.0
-        self.width = width * (spacing if np.isfinite(spacing) and spacing > 0 else 1.0)
-
-    def features(self, X: np.ndarray) -> np.ndarray:
-        """RBF features (with a constant) of raw (projected) observations: (n, m). Each row is
-        computed on its own (einsum and broadcasting, not BLAS, whose rounding depends on the batch),
-        so a row's features do not depend on which rows it was computed with: a run restored from a
-        checkpoint or replayed offline computes exactly the same numbers."""
-        Z = np.einsum("nd,dc->nc", np.atleast_2d(X) - self.mean, self.axes) / self.scale
-        d2 = ((Z[:, None, :] - self.centres[None, :, :]) ** 2).sum(axis=2)
-        return np.hstack([np.ones((Z.shape[0], 1)), np.exp(-0.5 * d2 / self.width**2)])
-
-    def phi(self, ids: np.ndarray, actions: np.ndarray) -> sp.csr_matrix:
-        rows = np.asarray(ids, dtype=np.int64).reshape(-1) % self.store.shape[0]
-        a = np.asarray(actions, dtype=np.int64).reshape(-1)
-        todo = np.unique(rows[~self._cached[rows]])
-        if todo.size:
-            self._cache[todo] = self.features(self.store[todo].astype(np.float64))
-            self._cached[todo] = True
-        f = self._cache[rows]
-        # one block of m features per row, at the column block of its action: sparse, 1/n_actions dense
-        cols = (a[:, None] * self.m + np.arange(self.m)[None, :]).ravel()
-        return sp.csr_matrix((f.ravel(), cols, np.arange(0, f.size + 1, self.m)), shape=(rows.size, self.k))
-
-
-def _basis_state(b: _RBFFeatures) -> dict[str, Any]:
-    return {
-        "mean": b.mean.copy(),
-        "axes": b.axes.copy(),
-        "scale": b.scale.copy(),
-        "centres": b.centres.copy(),
-        "width": b.width,
-    }
-
-
-def _set_basis(b: _RBFFeatures, s: dict[str, Any]) -> None:
-    b.mean, b.axes, b.scale = (np.array(s[k], dtype=np.float64) for k in ("mean", "axes", "scale"))
-    b.centres, b.width = np.array(s["centres"], dtype=np.float64), float(s["width"])
-    b.forget(slice(None))
-
-
-def iterate_job(
-    n_states: int,
-    n_actions: int,
-    gamma: float,
-    ridge: float,
-    capacity: int,
-    iterations: int,
-    samples: dict[str, Any],
-    store: np.ndarray | None,
-    basis: dict[str, Any] | None,
-    refit: np.ndarray | None,
-    fit: dict[str, Any],
-    tie_tolerance: float = 0.05,
-) -> dict[str, Any]:
-    """Feature refit (when `refit` holds the reservoir sample) and up to `iterations` LSPI
-    iterations over a snapshot of the samples: the new basis (if refitted), weights, iterations
-    done and the last change. Tabular when `store` is None. A pure function, run off the act path."""
-    if store is None:
-        lspi = LSPI(
-            TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=capacity, tie_tolerance=tie_tolerance
-        )
-    else:
-        rbf = _RBFFeatures(np.asarray(store), n_actions, int(fit["centres"]))
-        if refit is not None:
-            rbf.fit(
-                np.asarray(refit, dtype=np.float64), int(fit["components"]), int(fit["centres"]), float(fit["width"])
-            )
-        else:
-            assert basis is not None
-            _set_basis(rbf, basis)
-        lspi = LSPI(rbf, gamma=gamma, ridge=ridge, capacity=capacity, tie_tolerance=tie_tolerance)
-    lspi.restore(samples)
-    change, done = 0.0, 0
-    for _ in range(iterations):  # policy iteration until the weights settle
-        change = lspi.iterate()
-        done += 1
-        if change <= 1e-3 * (float(np.linalg.norm(lspi.w)) + 1e-12):
-            break
-    return {
-        "w": lspi.w,
-        "iterations": done,
-        "change": change,
-        "basis": None if store is None or refit is None else _basis_state(rbf),
-    }
-
-
-def embed_job(
-    traces: list[list[list[int]]],
-    actions: np.ndarray | None,
-    dims: int,
-    estimator: str = "mode",
-    distance: str = "padded",
-    dtw_penalty: float = 1.0,
-    rotations: tuple[int, list[list[int]]] | None = None,
-    n_actions: int = 0,
-    reached: list[list[bool]] | None = None,
-) -> dict[str, Any]:
-    """Trace distances and classical MDS of each start's sampled traces (one sample each in a
-    deterministic world): edit distance of discrete actions (in the start's frame when `rotations`,
-    (order, [[action, power], ...]), says which actions turn: `frame_trace`); the padded sum or DTW
-    of the action values when `actions` is the table of a discretised box. Several samples: the mode
-    trace, or the mean pairwise distance (ch. 9.4). A pure function, run off the act path."""
-    symbols = n_actions
-    if rotations is not None and actions is None:
-        rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
-        traces = [[frame_trace(t, rot, n_actions) for t in s] for s in traces]
-        symbols = n_actions * (1 + rot.order)  # the labels frame_trace gives
-    if estimator == "plain":  # one sampled trace per start, as if the world were deterministic
-        traces, reached = [s[:1] for s in traces], None if reached is None else [r[:1] for r in reached]
-    if any(len(t) > 1 for t in traces) and estimator == "mean_trace" and actions is None:
-        D = mean_trace_distances(traces, symbols, reached)
-    elif any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
-        D = mean_pair_distances(traces, substitution_cost=2)
-    else:
-        canon = [list(mode_trace(t)) for t in traces]
-        if actions is None:
-            D = trace_distances(canon, kind="edit", substitution_cost=2)
-        else:
-            table = np.asarray(actions)
-            cont = [table[np.asarray(t, dtype=np.int64)].reshape(len(t), table.shape[1]) for t in canon]
-            if distance == "dtw":
-                D = trace_distances(cont, kind="dtw", dtw_penalty=dtw_penalty)
-            elif distance == "net":  # the order of the moves does not count, only where they add up to
-                net = np.array([c.sum(axis=0) for c in cont])
-                D = np.linalg.norm(net[:, None, :] - net[None, :, :], axis=2)
-            else:
-                D = trace_distances(cont, kind="continuous")
-    mds = classical_mds(D, dims)
-    return {"coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
-
-
-def motor_job(
-    before: np.ndarray,
-    actions: np.ndarray,
-    after: np.ndarray,
-    starts: np.ndarray,
-    components: int,
-    seed: int,
-) -> dict[str, Any]:
-    """Fit the motor map (`agent.learners.motor_map`) on the warm-up's transitions and measure,
-    in its coordinates, the range the random moves covered and the range of the starts met."""
-    m = fit_motor_map(before, actions, after, components=components, seed=seed)
-    z = m(np.vstack([before, after]))
-    zs = m(starts) if len(starts) else z
-    return {
-        "map": m.state(),
-        "seen_lo": z.min(axis=0),
-        "seen_hi": z.max(axis=0),
-        "start_lo": zs.min(axis=0),
-        "start_hi": zs.max(axis=0),
-    }
+from sensorimotor.protocol.params import parse
 
 
 class GenericProgram(Program):
@@ -507,7 +108,7 @@ class GenericProgram(Program):
 
     name = "generic"
     Params = GenericProgramParams
-    _rbf: _RBFFeatures  # the LSPI basis when observations are neither state ids nor symbols
+    _rbf: RBFFeatures  # the LSPI basis when observations are neither state ids nor symbols
     detector_params = {"warmup": 30, "rate": 0.05}
     #: transitions remembered to tell a stochastic world (bounded memory)
     TRANSITIONS = 50_000
@@ -520,14 +121,12 @@ class GenericProgram(Program):
         self.params = prm = parse(GenericProgramParams, overrides, name=self.name, base=params)
         if not spec.sensors:
             raise SpecMismatch(f"generic program: world {spec.world_id} declares no sensors")
-        self.actions = _action_table(spec, prm.action_levels, prm.action_scale)
+        self.actions = action_table(spec, prm.action_levels, prm.action_scale)
         #: the stochastic-world estimator and traces per start in force (`auto` and 0 resolved)
-        self.estimator = (
-            prm.estimator if prm.estimator != "auto" else "mean_trace" if spec.action_space.discrete else "mode"
-        )
-        mean_trace = self.estimator == "mean_trace"
+        self.estimator = prm.estimator if prm.estimator != "auto" or spec.action_space.discrete else "mode"
+        mean_trace = self.estimator in ("mean_trace", "auto")
         self.samples = prm.samples or (int(np.clip(768 // max(1, spec.n_starts), 8, 64)) if mean_trace else 8)
-        self._motor_actions = _action_table(spec, prm.action_levels, prm.motor_scale or prm.action_scale)
+        self._motor_actions = action_table(spec, prm.action_levels, prm.motor_scale or prm.action_scale)
         self.n_actions = self.actions.shape[0]
         self.discrete = spec.action_space.discrete
         self.goal = str(spec.goal)
@@ -656,7 +255,7 @@ class GenericProgram(Program):
             self._proj = proj_rng.standard_normal((d, self.dim)) / np.sqrt(self.dim) if d > prm.projection else None
             self._store = np.zeros((2 * prm.max_samples + 2, self.dim), dtype=np.float32)
             self._reservoir = np.zeros((prm.reservoir, self.dim), dtype=np.float32)
-            self._rbf = basis = _RBFFeatures(self._store, self.n_actions, prm.centres)
+            self._rbf = basis = RBFFeatures(self._store, self.n_actions, prm.centres)
         declared = spec.params.get("max_episode_steps", "")
         limit = int(declared) if declared.isdigit() else 0
         self.max_trace = prm.max_trace or (min(limit, 250) if limit > 0 else 60)
@@ -690,7 +289,7 @@ class GenericProgram(Program):
         self._checking = False  # this sweep runs the accepted policy, not the newest one
         self._sweep_w: np.ndarray | None = None  # the weights the sweep in progress follows
         self._accepted_basis: dict[str, Any] | None = None  # lspi: the RBF basis the accepted weights are over
-        self._sweep_rbf: _RBFFeatures | None = None  # the basis the sweep in progress computes features with
+        self._sweep_rbf: RBFFeatures | None = None  # the basis the sweep in progress computes features with
         self._sweep_basis: dict[str, Any] | None = None  # and its state (lspi)
         self._accepted_traces: list[list[int]] | None = None  # the accepted policy's last sweep
         self._accepted_reached: list[bool] | None = None  # and which of its traces reached the goal
@@ -931,7 +530,7 @@ class GenericProgram(Program):
             iterations=prm.lspi_iterations,
             samples=self.lspi.samples(),
             store=None if self.tabular else self._store.copy(),
-            basis=None if self.tabular else _basis_state(self._rbf),
+            basis=None if self.tabular else basis_state(self._rbf),
             refit=refit,
             fit={"components": prm.components, "centres": prm.centres, "width": prm.width},
             tie_tolerance=self.lspi.tie_tolerance,
@@ -940,7 +539,7 @@ class GenericProgram(Program):
     def _iterated(self, result: dict[str, Any], step: int) -> None:
         """The job's basis and weights swapped in; report the policy iteration."""
         if result["basis"] is not None:
-            _set_basis(self._rbf, result["basis"])
+            set_basis(self._rbf, result["basis"])
         self.lspi.w = np.asarray(result["w"], dtype=np.float64)
         self.lspi.iterations += int(result["iterations"])
         self.emit_lspi_iteration(self.lspi, result["change"], step)
@@ -965,15 +564,15 @@ class GenericProgram(Program):
                 self._sweep_rbf = rbf
         return a
 
-    def _rbf_of(self, basis: dict[str, Any] | None) -> _RBFFeatures | None:
+    def _rbf_of(self, basis: dict[str, Any] | None) -> RBFFeatures | None:
         """An RBF basis in the state `basis` (None for None)."""
         if basis is None:
             return None
-        rbf = _RBFFeatures(self._store, self.n_actions, self.params.centres)
-        _set_basis(rbf, basis)
+        rbf = RBFFeatures(self._store, self.n_actions, self.params.centres)
+        set_basis(rbf, basis)
         return rbf
 
-    def _accepted_rbf(self) -> _RBFFeatures | None:
+    def _accepted_rbf(self) -> RBFFeatures | None:
         """The RBF basis the accepted weights are over, when it is not the current one."""
         return self._rbf_of(self._accepted_basis)
 
@@ -994,7 +593,7 @@ class GenericProgram(Program):
             # the basis is frozen for the sweep, as its weights are: a refit swapped in mid-sweep would
             # give the weights features they were not fitted on, and the accepted policy's basis would
             # not be the one its traces were made with (a check sweep then differs: a false drop)
-            use = self._accepted_basis if check and self._accepted_basis is not None else _basis_state(self._rbf)
+            use = self._accepted_basis if check and self._accepted_basis is not None else basis_state(self._rbf)
             self._sweep_basis = use
             self._sweep_rbf = self._rbf_of(use)
         else:
@@ -1378,8 +977,9 @@ class GenericProgram(Program):
                 self._note_transition(self._prev_key, pa, obs)
             outcome = "goal" if reached(self.goal, obs) else "failure" if failed(self.goal, obs) else "continue"
             self._fresh = self.model.learn_one(ps, pa, s, outcome) or self._fresh
-            self.new_samples += 1
             self._since_plan += 1
+            if self.phase == "explore":  # a sweep's steps are counted by the model, not toward the next sweep
+                self.new_samples += 1
         self._prev, self._prev_key = None, None
         if self.phase == "explore":
             if sweep and self.spec.n_starts >= 2:
@@ -1743,7 +1343,7 @@ class GenericProgram(Program):
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
             out.update(lo=self._lo.copy(), span=self._span.copy())
         elif self.learner == "lspi":
-            out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=_basis_state(self._rbf))
+            out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=basis_state(self._rbf))
         return out
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -1839,7 +1439,16 @@ class GenericProgram(Program):
         elif self.learner == "lspi":
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
-            _set_basis(self._rbf, state["basis"])
+            set_basis(self._rbf, state["basis"])
 
 
-__all__ = ["LEARNERS", "GenericProgram", "GenericProgramParams"]
+# jobs saved in flight name their function by module: the names they had here still resolve
+__all__ = [
+    "LEARNERS",
+    "GenericProgram",
+    "GenericProgramParams",
+    "embed_job",
+    "end_disparity",
+    "iterate_job",
+    "motor_job",
+]

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.embedding import procrustes_error
-from sensorimotor.agent.programs.generic import embed_job
+from sensorimotor.agent.programs.generic_jobs import embed_job
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from sensorimotor.agent.programs.generic import GenericProgram
 from sensorimotor.protocol.messages import Control, Embedding
 from sensorimotor.tools.experiments import scoring
 from sensorimotor.tools.experiments.objectpose import peers
+from sensorimotor.tools.experiments.shared import pool_map
 from sensorimotor.tools.inprocess import InProcessRun, run_inprocess
 from sensorimotor.worlds.arm import ArmWorld
 
@@ -220,16 +221,13 @@ def _plot_changes(out: str, res: list[dict[str, Any]]) -> None:
 def chapter(runs: int, quick: bool, workers: int, out: str) -> dict[str, Any]:
     """`sme reproduce arm`: per body the embedding against both truths beside the peers; per change
     the steps to detection and to the relearned map and its error; false alarms; 95 % CIs."""
-    from sensorimotor.tools.reproduce import _pool_map
 
     os.makedirs(out, exist_ok=True)
     lattice, embeddings, steps, at, quiet = (5, 4, 8_000, 2_000, 10_000) if quick else (7, 8, 30_000, 6_000, 50_000)
-    bodies = _pool_map(
-        body_job, [(b, s, lattice, embeddings, steps, out) for b in BODIES for s in range(runs)], workers
-    )
+    bodies = pool_map(body_job, [(b, s, lattice, embeddings, steps, out) for b in BODIES for s in range(runs)], workers)
     jobs = [(c, s, lattice, at, at + 10_000, out) for c in CHANGES for s in range(runs)]
     jobs += [("none", s, lattice, 0, quiet, out) for s in range(max(1, runs // 2))]
-    changes = _pool_map(change_job, jobs, workers)
+    changes = pool_map(change_job, jobs, workers)
     ci = scoring.ci95
 
     def f(v: list[float], d: int = 4) -> str:

@@ -18,6 +18,7 @@ from sensorimotor.agent.embedding.probabilistic import (
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.tools.experiments import scoring
 from sensorimotor.tools.experiments.scoring import score_points
+from sensorimotor.tools.experiments.shared import ci95, fmt, pool_map
 from sensorimotor.worlds.gridworld import GridWorld
 
 # --- probabilistic sensorimotor embedding (9.4) --------------------------------------------------
@@ -435,11 +436,9 @@ def _censored(r: dict, name: str, budget: int) -> float:
     return float(budget if v is None else v)
 
 
-def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
+def chapter(runs: int, quick: bool, workers: int, out: str) -> dict:
     """`sme reproduce chapter9`: probabilistic embedding, options, policy maps, variations."""
     from scipy import stats
-
-    from sensorimotor.tools.reproduce import _ci95, _fmt, _pool_map
 
     budget, opt_size = (40_000, 15) if quick else (80_000, 15)
     pm_train, pm_starts = (30_000, 500) if quick else (30_000, 1000)
@@ -447,19 +446,19 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
     runs = min(runs, 5) if quick else runs
     seeds = list(range(runs))
 
-    prob = _pool_map(probabilistic_job, [(s, 0.2, slip_size) for s in seeds], workers)
-    opts = _pool_map(options_job, [(s, budget, 4, opt_size) for s in seeds], workers)
-    maps = _pool_map(policy_map_job, [(s, pm_train, pm_starts, 5) for s in seeds], workers)
-    iso = _pool_map(isomap_job, [(s, b) for b in (False, True) for s in seeds], workers)
-    verg = _pool_map(state_aided_job, [(n,) for n in ((20,) if quick else (20, 30, 40))], workers)
+    prob = pool_map(probabilistic_job, [(s, 0.2, slip_size) for s in seeds], workers)
+    opts = pool_map(options_job, [(s, budget, 4, opt_size) for s in seeds], workers)
+    maps = pool_map(policy_map_job, [(s, pm_train, pm_starts, 5) for s in seeds], workers)
+    iso = pool_map(isomap_job, [(s, b) for b in (False, True) for s in seeds], workers)
+    verg = pool_map(state_aided_job, [(n,) for n in ((20,) if quick else (20, 30, 40))], workers)
 
     # options: training steps to the level (censored at the budget when never reached)
     level = opts[0]["level"]
     to_level = {a: [_censored(r, a, budget) for r in opts] for a in AGENTS}
     steps_to_level = {
         a: {
-            "mean": _ci95(v)[0],
-            "ci95": _ci95(v)[1],
+            "mean": ci95(v)[0],
+            "ci95": ci95(v)[1],
             "runs": v,
             "reached": sum(r[a]["steps_to_level"] is not None for r in opts),
         }
@@ -474,9 +473,9 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
     saving = 1.0 - float(np.mean(to_level["discovered"])) / float(np.mean(to_level["none"]))
     # policy maps: clusters per seed, and which true outcomes have a cluster of their own
     covered = [sorted({c["majority"] for c in m["clusters"] if c["purity"] >= 0.6 and c["size"] >= 5}) for m in maps]
-    prob_ci = {k: _ci95([r[k] for r in prob]) for k in ("plain", "mode", "mean", "mean_debiased")}
-    samples = {k: _ci95([r[k] for r in prob]) for k in ("samples_mode", "samples_mean")}
-    iso_ci = {(b, k): _ci95([r[k] for r in iso if r["barrier"] == b]) for b in (False, True) for k in ("mds", "isomap")}
+    prob_ci = {k: ci95([r[k] for r in prob]) for k in ("plain", "mode", "mean", "mean_debiased")}
+    samples = {k: ci95([r[k] for r in prob]) for k in ("samples_mode", "samples_mean")}
+    iso_ci = {(b, k): ci95([r[k] for r in iso if r["barrier"] == b]) for b in (False, True) for k in ("mds", "isomap")}
 
     def pcell(name: str) -> str:
         return scoring.cell([r["field_scores"].get(name) for r in prob])
@@ -492,11 +491,11 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
         "",
         f"| estimator | Procrustes error | {scoring.HEADER} | samples per start (chosen) |",
         "|---|---|---|---|",
-        f"| plain (one sampled trace per start) | {_fmt(prob_ci['plain'], 4)} | {pcell('plain')} | 1 |",
-        f"| mode of sampled traces | {_fmt(prob_ci['mode'], 4)} | {pcell('mode')} | {_fmt(samples['samples_mode'], 1)} |",
-        f"| mean distance over sampled pairs | {_fmt(prob_ci['mean'], 4)} | {pcell('mean')} "
-        f"| {_fmt(samples['samples_mean'], 1)} |",
-        f"| mean distance, spread removed | {_fmt(prob_ci['mean_debiased'], 4)} | {pcell('mean_debiased')} "
+        f"| plain (one sampled trace per start) | {fmt(prob_ci['plain'], 4)} | {pcell('plain')} | 1 |",
+        f"| mode of sampled traces | {fmt(prob_ci['mode'], 4)} | {pcell('mode')} | {fmt(samples['samples_mode'], 1)} |",
+        f"| mean distance over sampled pairs | {fmt(prob_ci['mean'], 4)} | {pcell('mean')} "
+        f"| {fmt(samples['samples_mean'], 1)} |",
+        f"| mean distance, spread removed | {fmt(prob_ci['mean_debiased'], 4)} | {pcell('mean_debiased')} "
         "| same samples |",
         "",
         f"### Option discovery (9.6, Fig 9.3): {opt_size}x{opt_size} gridworld, goal in the far corner",
@@ -533,9 +532,9 @@ def chapter9(runs: int, quick: bool, workers: int, out: str) -> dict:
         f"| gridworld | Procrustes, classical MDS | {scoring.HEADER}, MDS | Procrustes, Isomap (8 neighbours) "
         f"| {scoring.HEADER}, Isomap |",
         "|---|---|---|---|---|",
-        f"| plain | {_fmt(iso_ci[(False, 'mds')], 4)} | {icell(False, 'mds')} | {_fmt(iso_ci[(False, 'isomap')], 4)} "
+        f"| plain | {fmt(iso_ci[(False, 'mds')], 4)} | {icell(False, 'mds')} | {fmt(iso_ci[(False, 'isomap')], 4)} "
         f"| {icell(False, 'isomap')} |",
-        f"| barrier | {_fmt(iso_ci[(True, 'mds')], 4)} | {icell(True, 'mds')} | {_fmt(iso_ci[(True, 'isomap')], 4)} "
+        f"| barrier | {fmt(iso_ci[(True, 'mds')], 4)} | {icell(True, 'mds')} | {fmt(iso_ci[(True, 'isomap')], 4)} "
         f"| {icell(True, 'isomap')} |",
         "",
         "| vergence starts | far starts sharing a goal step | far-half error, plain (rad) | state-aided (rad) | "

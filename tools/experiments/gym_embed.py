@@ -117,7 +117,7 @@ def step_gain(sent: np.ndarray, moved: np.ndarray, gain: np.ndarray) -> dict[str
 
 
 def cli(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])  # the whole first paragraph
     p.add_argument("world", help="a world kind or gym:ENV_ID")
     p.add_argument("--steps", type=int, default=20_000, help="steps to run (default 20000)")
     p.add_argument("--seed", type=int, default=0)

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from sensorimotor.tools.experiments.shared import pool_map
+
 
 def job(seed: int, rule: str, radius: float, at: int, steps: int, every: int) -> dict[str, Any]:
     """One seeded run: the greedy activation curve around a lesion of `radius` at (radius, 0)."""
@@ -90,13 +92,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     radii = [float(x) for x in a.radii.split(",")]
-    from sensorimotor.tools.reproduce import _pool_map
 
     t0 = time.time()
     jobs = [
         (s, rule, rad, a.at, a.steps, a.every) for rad in radii for rule in ("basic", "robust") for s in range(a.runs)
     ]
-    res = _pool_map(job, jobs, a.workers)
+    res = pool_map(job, jobs, a.workers)
     command = (
         f"python -m sensorimotor.tools.experiments.lesion_sweep --runs {a.runs} --radii {a.radii} --at {a.at} "
         f"--steps {a.steps} --every {a.every}"

@@ -10,6 +10,9 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from sensorimotor.protocol.messages import Trigger
+from sensorimotor.tools.experiments import scoring
+from sensorimotor.tools.experiments.shared import ci95, fmt, mean_se, plot, pool_map
 from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, evaluation_states, random_state
 from sensorimotor.worlds.mountaincar_dynamics import step as car_step
 
@@ -164,3 +167,175 @@ def steps_to_goal(policy, states: np.ndarray, cap: int = 1000) -> float:
 def random_agent(seed: int, n_eval: int = 100, cap: int = 1000) -> float:
     rng = np.random.default_rng(seed)
     return steps_to_goal(lambda s: int(rng.integers(3)), evaluation_states(n_eval), cap)
+
+
+# --- `sme reproduce mountaincar`: the seeded jobs and the chapter's table and plots -------------------
+
+
+def job_mountaincar(kind: str, seed: int, train: int, every: int, n_eval: int, morph_at: int | None = None) -> dict:
+    if kind == "true":
+        r = true_state(seed, train, every, n_eval)
+    elif kind == "random":
+        return {"kind": kind, "seed": seed, "curve": [(0, random_agent(seed, n_eval))]}
+    elif kind == "live":
+        if morph_at is None:
+            raise ValueError("the live morph run needs morph_at")
+        r = visual(
+            seed,
+            train,
+            every,
+            n_eval,
+            morph_at=morph_at,
+            morph={"baseline": "1.4"},
+            detector="cusum",
+            watch_after=morph_at // 2,
+        )
+    else:
+        bodies: dict[str, dict[str, Any]] = {
+            "baseline-1.0": {},
+            "baseline-1.4": {"baseline": 1.4},
+            "vertical": {"vertical": True},
+        }
+        body = bodies[kind]
+        r = visual(seed, train, every, n_eval, **body)
+    return {
+        "kind": kind,
+        "seed": seed,
+        "curve": r.curve,
+        "embeddings": r.embeddings,
+        "drops": r.drops,
+        "morph_at": r.morph_at,
+        "world_steps": r.world_steps,
+        "seconds": r.seconds,
+    }
+
+
+#: where `pool_map` runs jobs: None = this machine's process pool, else a Ray cluster's address
+
+
+def chapter(runs: int, quick: bool, workers: int, out: str) -> dict:
+    # --quick: 20,000 training car steps and one evaluation at the end (the full run evaluates every
+    # 10,000 and scores the last three); one live body change, evaluated every 10,000 around it
+    train, every, n_eval = (20_000, 20_000, 20) if quick else (100_000, 10_000, 100)
+    live_every, n_live = (10_000, 1) if quick else (every, max(1, runs // 2))
+    morph_at = train
+    kinds = ("baseline-1.0", "baseline-1.4", "vertical", "true")
+    # the longest jobs first (the live run drives twice as long), so that both cores stay busy
+    jobs: list[tuple[Any, ...]] = [("live", s, 2 * train, live_every, n_eval, morph_at) for s in range(n_live)]
+    jobs += [(k, s, train, every, n_eval) for k in kinds for s in range(runs)]
+    jobs += [("random", s, train, every, n_eval) for s in range(runs)]
+    res = pool_map(job_mountaincar, jobs, workers)
+
+    def final(r: dict) -> float:  # the end of training: the mean of the last three evaluations
+        return float(np.mean([m for _, m in r["curve"][-3:]]))
+
+    finals = {k: [final(r) for r in res if r["kind"] == k] for k in kinds + ("random",)}
+    ci = {k: ci95(v) for k, v in finals.items()}
+    from scipy import stats
+
+    lines = [
+        f"Visual mountain car (ch. 8): {runs} seeded runs per body; {train} training car steps, evaluated every "
+        f"{every} on {n_eval} fixed random states (mean steps to goal, lower is better; 1000 = never).",
+        "",
+        "| agent | steps to goal at the end (mean ± 95 % CI) | vs true state | dissertation |",
+        "|---|---|---|---|",
+    ]
+    t = ci["true"][0]
+    for k, label in (
+        ("baseline-1.0", "sensorimotor features, baseline 1.0 m"),
+        ("baseline-1.4", "same program, baseline 1.4 m"),
+        ("vertical", "same program, vertical cameras"),
+        ("true", "true position and velocity"),
+        ("random", "random agent"),
+    ):
+        ref = {"true": "ideal", "random": "benchmark"}.get(k, "comparable to true state")
+        lines.append(f"| {label} | {fmt(ci[k], 1)} | {ci[k][0] / t:.2f}x | {ref} |")
+    lines += [
+        "",
+        "The vergence embedding each body's program drives on (its last one; Procrustes mean ± standard error, "
+        f"{scoring.HEADER} mean ± 95 % CI):",
+        "",
+        f"| body | Procrustes error | {scoring.HEADER} |",
+        "|---|---|---|",
+    ]
+    for k in ("baseline-1.0", "baseline-1.4", "vertical"):
+        lastemb = [r["embeddings"][-1] for r in res if r["kind"] == k and r["embeddings"]]
+        errs = [float(e["procrustes_error"]) for e in lastemb if e.get("procrustes_error") is not None]
+        lines.append(
+            f"| {k} | {fmt(mean_se(errs), 4) if errs else 'n/a'} | {scoring.cell([e.get('scores') for e in lastemb])} |"
+        )
+    pairs = [("baseline-1.0", "baseline-1.4"), ("baseline-1.0", "vertical"), ("baseline-1.4", "vertical")]
+    tests = {
+        f"{a} vs {b}": float(stats.ttest_ind(finals[a], finals[b], equal_var=False).pvalue)
+        if len(finals[a]) > 1 and len(finals[b]) > 1
+        else float("nan")
+        for a, b in pairs
+    }
+    lines += [
+        "",
+        "Bodies compared (Welch t-test p, no significant difference when > 0.05): "
+        + ", ".join(f"{k}: p = {p:.2f}" for k, p in tests.items()),
+    ]
+    live = []
+    for r in (r for r in res if r["kind"] == "live"):
+        pre = [m for s, m in r["curve"] if s <= r["morph_at"]][-2:]
+        before = float(np.mean(pre)) if pre else float("nan")
+        drops = [d for d in r["drops"] if d >= r["morph_at"]]
+        relearned = [e for e in r["embeddings"] if e["trigger"] == Trigger.RELEARNED]
+        back = next(
+            (
+                s
+                for s, m in r["curve"]
+                if s > r["morph_at"] and relearned and s >= relearned[0]["training_steps"] and m <= 1.2 * before
+            ),
+            None,
+        )
+        live.append(
+            {
+                "seed": r["seed"],
+                "before": before,
+                "detected_after": (drops[0] - r["morph_at"]) if drops else None,
+                "relearned_embedding": bool(relearned),
+                "recovered_after": (back - r["morph_at"]) if back else None,
+                "after": [m for s, m in r["curve"] if s > r["morph_at"]],
+            }
+        )
+    lines += ["", f"Live body change, baseline 1.0 → 1.4 m after {morph_at} training steps (per run): "]
+    for lv in live:
+        lines.append(
+            f"- seed {lv['seed']}: before {lv['before']:.1f} steps to goal; drop detected "
+            f"{lv['detected_after']} training steps after the change; new embedding: {lv['relearned_embedding']}; "
+            f"back within 20 % after {lv['recovered_after']} training steps; evaluations after: "
+            f"{[round(m, 1) for m in lv['after']]}"
+        )
+    series = []
+    for k in kinds:
+        rs = [r for r in res if r["kind"] == k]
+        xs = [s for s, _ in rs[0]["curve"]]
+        series.append((k, xs, np.mean([[m for _, m in r["curve"]][: len(xs)] for r in rs], axis=0)))
+    series.append(("random", [series[0][1][0], series[0][1][-1]], [ci["random"][0]] * 2))
+    plot(
+        out,
+        "mountaincar_learning.png",
+        "Mean steps to goal (Fig 8.2, 8.4)",
+        "training car steps",
+        "steps to goal",
+        series,
+        logy=True,
+    )
+    if live:
+        plot(
+            out,
+            "mountaincar_live_morph.png",
+            "Baseline 1.0 → 1.4 m while driving",
+            "training car steps",
+            "steps to goal",
+            [
+                (f"seed {r['seed']}", [s for s, _ in r["curve"]], [m for _, m in r["curve"]])
+                for r in res
+                if r["kind"] == "live"
+            ],
+            logy=True,
+            vline=morph_at,
+        )
+    return {"results": res, "finals": finals, "ci95": ci, "welch_p": tests, "live": live, "markdown": "\n".join(lines)}

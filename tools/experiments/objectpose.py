@@ -29,6 +29,7 @@ from sensorimotor.agent.learners.lspi import LSPI
 from sensorimotor.agent.programs.generic import GenericProgram
 from sensorimotor.tools.experiments import scoring
 from sensorimotor.tools.experiments.scoring import score_points, scores_of
+from sensorimotor.tools.experiments.shared import ci95, pool_map
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.objectpose import ObjectPoseWorld
 
@@ -351,18 +352,17 @@ def _plot_fig64(out: str, res: list[dict[str, Any]]) -> None:
 def chapter(runs: int, quick: bool, workers: int, out: str) -> dict[str, Any]:
     """`sme reproduce objectpose`: the table (sensorimotor embedding vs PCA vs Isomap, 95 % CIs
     over seeds), Fig 6.2, 6.3 and 6.4."""
-    from sensorimotor.tools.reproduce import _ci95, _pool_map
 
     half_range, embeddings, steps, samples = (2, 8, 8_000, 100) if quick else (3, 10, 30_000, 200)
-    res = _pool_map(job, [(s, half_range, embeddings, steps, 5, samples) for s in range(runs)], workers)
+    res = pool_map(job, [(s, half_range, embeddings, steps, 5, samples) for s in range(runs)], workers)
     for r in res:
         r["se_scree"] = _normalised(r["eigenvalues"])
-    se = _ci95([r["final_error"] for r in res])
-    pca = _ci95([r["pca_error"] for r in res])
-    iso = _ci95([r["isomap_error"] for r in res])
-    first = _ci95([r["errors"][0] for r in res])
+    se = ci95([r["final_error"] for r in res])
+    pca = ci95([r["pca_error"] for r in res])
+    iso = ci95([r["isomap_error"] for r in res])
+    first = ci95([r["errors"][0] for r in res])
     within = [next((i + 1 for i, s in enumerate(r["alignment_success"]) if s >= 0.95), None) for r in res]
-    last_align = _ci95([r["alignment_success"][-1] for r in res])
+    last_align = ci95([r["alignment_success"][-1] for r in res])
     n = (2 * half_range + 1) ** 2
     best_peer = min(pca[0], iso[0])
 

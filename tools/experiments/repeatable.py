@@ -103,7 +103,7 @@ def main(
 
 
 def cli(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])  # the whole first paragraph
     p.add_argument("world", help="a world kind or gym:ENV_ID")
     p.add_argument("--seed", type=int, default=0, help="seeds the world and the moves (default 0)")
     p.add_argument("--param", action="append", metavar="K=V", help="world parameter, repeatable")

@@ -13,6 +13,7 @@ import numpy as np
 
 from sensorimotor.agent.programs.retina import RetinaProgram
 from sensorimotor.protocol.messages import Observation
+from sensorimotor.tools.experiments.shared import ci95, plot, pool_map
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.natural_retina import NaturalRetinaWorld
 
@@ -124,12 +125,11 @@ def job(seed: int, steps: int, every: int, image: str) -> dict:
 
 def chapter(runs: int, quick: bool, workers: int, out: str, image: str = "astronaut") -> dict:
     """`sme reproduce retina --scene natural`: Table 4.1 with 95 % CIs over `runs` seeds."""
-    from sensorimotor.tools.reproduce import _ci95, _plot, _pool_map
 
     steps, every = (2000, 500) if quick else (5000, 500)
-    res = _pool_map(job, [(s, steps, every, image) for s in range(runs)], workers)
+    res = pool_map(job, [(s, steps, every, image) for s in range(runs)], workers)
     ci = {
-        k: _ci95([r[k][-1] for r in res])
+        k: ci95([r[k][-1] for r in res])
         for k in ("one", "two", "fixed", "geometry", "one_target", "two_target", "fixed_target")
     }
     labels = {"one": "1 saccade", "two": "2 saccades", "fixed": "fixed point", "geometry": "mean geometry error"}
@@ -149,7 +149,7 @@ def chapter(runs: int, quick: bool, workers: int, out: str, image: str = "astron
         for k in labels
     ]
     xs = res[0]["steps"]
-    _plot(
+    plot(
         out,
         "retina_natural.png",
         f"Saccade error on '{image}' (Table 4.1)",

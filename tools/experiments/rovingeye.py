@@ -20,6 +20,7 @@ from sensorimotor.agent.embedding import classical_mds, procrustes, trace_distan
 from sensorimotor.agent.learners.saccade import SaccadeLearner
 from sensorimotor.tools.experiments import scoring
 from sensorimotor.tools.experiments.scoring import score_points
+from sensorimotor.tools.experiments.shared import ci95, plot, pool_map
 from sensorimotor.worlds.perceptual_goals import IntensitySurface, directions, gradient_step, reward, score
 from sensorimotor.worlds.roving_eye import eye_bounds, eye_view, image_goals, load_image
 
@@ -354,14 +355,13 @@ def plot_fig_5_11(out: str, fig: dict) -> None:
 
 def chapter(runs: int, quick: bool, workers: int, out: str) -> dict:
     """`sme reproduce rovingeye`: Table 5.1 over `runs` seeds with 95 % CIs, Fig 5.8 and Fig 5.11."""
-    from sensorimotor.tools.reproduce import _ci95, _plot, _pool_map
 
-    res = _pool_map(job, [(s, quick) for s in range(runs)], workers)
+    res = pool_map(job, [(s, quick) for s in range(runs)], workers)
     cfg = quick_config() if quick else Config()
     errors = {m: [r["errors"][m] for r in res] for m in METHODS}
     scores = {m: [r["scores"][m] for r in res] for m in METHODS[1:]}
-    err_ci = {m: _ci95(v) for m, v in errors.items()}
-    sc_ci = {m: _ci95(v) for m, v in scores.items()}
+    err_ci = {m: ci95(v) for m, v in errors.items()}
+    sc_ci = {m: ci95(v) for m, v in scores.items()}
     ordered = all(err_ci[a][0] > err_ci[b][0] for a, b in zip(METHODS, METHODS[1:], strict=False))
     rising = all(sc_ci[a][0] < sc_ci[b][0] for a, b in zip(METHODS[1:], METHODS[2:], strict=False))
     head = "| | " + " | ".join(LABELS[m] for m in METHODS) + " |"
@@ -390,7 +390,7 @@ def chapter(runs: int, quick: bool, workers: int, out: str) -> dict:
         f"every error at or below the dissertation's: {all(err_ci[m][0] <= DISSERTATION_ERROR[m] for m in METHODS)}.",
     ]
     weights = {m: np.mean([scree(r["eigenvalues"][m]) for r in res], axis=0) for m in METHODS}
-    _plot(
+    plot(
         out,
         "rovingeye_scree.png",
         "Normalised weight of the first ten MDS components (Fig 5.8)",
