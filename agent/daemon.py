@@ -1276,8 +1276,15 @@ class AgentDaemon:
         as gone); a world's missed event also goes to the main loop, as zenoh's would have."""
         audit = TokenAudit()
         exprs = (keys.ALL_ALIVE_WORLDS, keys.ALL_ALIVE_OWNERS, keys.ALL_CLAIMS)
+        steps: dict[str, int] = {}
+        # a router answers from its own tables; a client (a worker) through its link to one, whose
+        # answers go empty while the link is re-made under load: a client books only what the audit
+        # finds alive (a missed appearance leaves a world nobody claims; a false disappearance
+        # would pause a live world and hand it off; a missed disappearance only keeps a claim)
+        router = getattr(getattr(self.bus, "config", None), "mode", "router") == "router"
         while not self._stop.wait(self.AUDIT_EVERY):
             held = self.book.tokens()  # before the queries: an event meanwhile shows as touched
+            sure = self._surely_alive(steps)
             for expr in exprs:
                 booked = held[expr]
                 try:
@@ -1290,13 +1297,51 @@ class AgentDaemon:
                     # session that watches the same tokens (~1 query in 5 here, whatever the reply handler);
                     # taken as evidence, a few such answers in a row unbooked every world at once
                     continue
+                # under load an answer can lack replies (issue 41: hundreds of fake worlds mended as gone
+                # and back, a healthy world paused): one that lacks a token surely alive is not used
+                lacking = sure[expr] - set(alive)
+                if expr == keys.ALL_CLAIMS:
+                    lacking &= self._own_claims()  # not withdrawn while the query ran
+                if lacking:
+                    log.debug("liveliness audit of %s skipped: the answer lacks %d live tokens", expr, len(lacking))
+                    continue
                 for key, is_alive, since in audit.check(expr, booked, alive, time.monotonic(), self.book.touched):
+                    if not is_alive and (not router or self._answers_alive(key)):
+                        continue  # a client (see `router`), or absent from the list but present when asked alone
                     if not self.book.mend(expr, key, is_alive, since):
                         continue
                     self.counters["liveliness_mended"] += 1
                     log.info("liveliness token %s is %s, but zenoh never said so", key, "alive" if is_alive else "gone")
                     if expr == keys.ALL_ALIVE_WORLDS:
                         self._changes.put((keys.last_chunk(key), is_alive))
+
+    def _surely_alive(self, steps: dict[str, int]) -> dict[str, set[str]]:
+        """Tokens a complete liveliness answer lists, per audited expression: this owner's own token
+        and claims, and the worlds whose links here answered an observation since the last call
+        (`steps`: each link's steps then, updated)."""
+        worlds = set()
+        for wid, link in list(self.links.items()):
+            n = link.counters.steps
+            if link.state == "attached" and steps.get(wid, n) != n:
+                worlds.add(keys.alive_world(wid))
+            steps[wid] = n
+        return {
+            keys.ALL_ALIVE_WORLDS: worlds,
+            keys.ALL_ALIVE_OWNERS: {keys.alive_owner(self.owner_id)},
+            keys.ALL_CLAIMS: self._own_claims(),
+        }
+
+    def _own_claims(self) -> set[str]:
+        """This owner's claim tokens declared at least a second ago (the bus has them all by then)."""
+        now = time.monotonic()
+        return {keys.alive_claim(w, self.owner_id) for w, (_, t) in list(self._claims.items()) if now - t >= 1.0}
+
+    def _answers_alive(self, key: str) -> bool:
+        """Whether a liveliness query for token `key` alone finds it (True when in doubt)."""
+        try:
+            return bool(self.bus.alive(key, timeout=1.0, complete=True))
+        except Exception:  # noqa: BLE001 - a closing session or a route's error
+            return True
 
     TICK = 0.1  # seconds between two ownership ticks when no world appeared or vanished
     MIN_TICK = 0.02  # when some did or the last tick claimed one: at most one per MIN_TICK (a tick is O(worlds))

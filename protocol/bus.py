@@ -354,6 +354,37 @@ def _guard(callback: Callable[[BusMessage], None], what: str) -> Callable[[Any],
     return run
 
 
+COLLECT_GRACE = 5.0  # seconds a query may outlast its own timeout before its replies are taken as they are
+
+
+def _collect(start: Callable[[Any], Any], timeout: float) -> tuple[list[Any], bool]:
+    """The replies of a zenoh query started by `start(handler)`, gathered by a callback.
+
+    Not zenoh's default handler: that is a FIFO of 256 replies which the caller drains only once the
+    query call has returned, and a session answers the part of a query it can from its own tables
+    (a router: every liveliness token it knows; any session: its own tokens) inside that call, with
+    its state locked. With more than 256 such replies the call waited forever for room, every
+    other use of the session (puts included) waited for the lock, and the process stopped
+    answering (issue 41: `sme bench fuzz` declares ~800 fake worlds). The callback only appends,
+    on a thread of its own (indirect), so it never holds the session up; its `drop` says the query
+    is over (all replies in, or `timeout` passed). Returns the replies and whether the query ended
+    before its timeout (else replies may be missing).
+    """
+    got: list[Any] = []
+    done = threading.Event()
+    t0 = time.monotonic()
+    start(zenoh.handlers.Callback(got.append, done.set))
+    over = done.wait(timeout + COLLECT_GRACE)
+    if not over:
+        log.warning(
+            "a query was not over %.1f s after its %.1f s timeout; using its %d replies",
+            COLLECT_GRACE,
+            timeout,
+            len(got),
+        )
+    return list(got), over and time.monotonic() - t0 < timeout * 0.95
+
+
 class Inbox:
     """A bounded queue filled by a subscriber: when full, the oldest message is dropped and counted."""
 
@@ -728,35 +759,25 @@ class Bus:
         timeout : float, default=1.0
             Seconds to wait for the answer.
         complete : bool, default=False
-            Raise BusError when some route answered with an error (the list may then lack tokens)
-            instead of returning what the others answered.
+            Raise BusError when some route answered with an error or the query ran out of time (the
+            list may then lack tokens) instead of returning what came. Even a complete answer can
+            lack a token under load (a reply lost on its way): a token's absence is weaker evidence
+            than its presence.
 
         Returns
         -------
         list of str
         """
-        # the replies go to a callback, not to zenoh's default channel: that channel holds 256 replies,
-        # and a session that also watches these tokens gets its known tokens delivered inside the get
-        # call itself, so a 257th token blocked the call forever (zenoh 1.x; the agent's liveliness
-        # audit hung with the session's lock held, and with it the whole session)
-        out: list[str] = []
-        errors: list[bool] = []
-        done = threading.Event()
-
-        def reply(r: Any) -> None:
+        out = []
+        replies, in_time = _collect(lambda h: self._session.liveliness().get(key, h, timeout=timeout), timeout)
+        if complete and not in_time:
+            raise BusError(f"liveliness query {key}: no end of the answer within {timeout:g} s")
+        for r in replies:
             if r.ok is not None:
                 out.append(str(r.ok.key_expr))
-            else:
-                errors.append(True)
-
-        self._session.liveliness().get(
-            key, handler=zenoh.handlers.Callback(reply, done.set, indirect=False), timeout=timeout
-        )
-        if not done.wait(timeout + 1.0):
-            log.debug("liveliness query %s: no end of replies after %g s; using what arrived", key, timeout)
-        if errors and complete:
-            raise BusError(f"liveliness query {key}: a route answered with an error")
-        return list(out)
+            elif complete:
+                raise BusError(f"liveliness query {key}: a route answered with an error")
+        return list(dict.fromkeys(out))  # a client's own tokens are answered by itself and by its router
 
     def undeclare(self, entity: Any) -> None:
         """Undeclare a publisher (a `Publisher` or the zenoh one), subscriber, queryable or token made

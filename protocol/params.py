@@ -12,7 +12,14 @@ its default and a one-line doc, optionally a range or a set of choices::
 (the command line) or already-typed values (Python callers, JSON configs): unknown keys are refused
 with the valid ones listed and the closest suggested, values are cast by the declared type and
 checked against the declared range and choices. Every failure is a `ParamError` (a ValueError)
-whose message names the owner, the key and the value. `table_text` and `table_markdown` render the
+whose message names the owner, the key and (a bounded prefix of) the value.
+
+This is the one parser of world, perturbation and program parameters, and a strict one (what
+Python's own `int`/`float` would let through is not a number here): ASCII digits only, no
+underscores (`1_0`), no `inf`/`nan`, no float that underflows to 0 (`1e-400`); booleans exactly
+`true/false/yes/no/on/off/1/0` and none exactly `none/null`, lowercase (`TRUE` is refused); a
+value of at most `MAX_VALUE_CHARS` characters (a number: `MAX_NUMBER_CHARS`); a key given twice in
+one set of `k=v` items is refused. `table_text` and `table_markdown` render the
 declarations for `--list-params` and the README, so documentation cannot drift from the code.
 
 Pure Python (plus rapidfuzz for suggestions): importable by `agent` and `worlds` alike.
@@ -22,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import types
 import typing
 from collections.abc import Iterable, Mapping
@@ -33,10 +41,13 @@ if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
 __all__ = [
+    "MAX_NUMBER_CHARS",
+    "MAX_VALUE_CHARS",
     "ParamError",
     "ParamInfo",
     "option",
     "parse",
+    "quote",
     "cast_values",
     "assignments",
     "describe",
@@ -52,6 +63,21 @@ P = TypeVar("P", bound="DataclassInstance")
 _TRUE = ("true", "1", "yes", "on")
 _FALSE = ("false", "0", "no", "off")
 _NONE = ("none", "null")
+MAX_VALUE_CHARS = 1024  # characters of one value (a name, a path, a list of numbers)
+MAX_NUMBER_CHARS = 64  # characters of one number (a float needs 24 at most to be exact)
+QUOTE_CHARS = 40  # characters of an offending value (or key) an error message quotes at most
+_INT = re.compile(r"[+-]?[0-9]+")
+_FLOAT = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_MANTISSA_NONZERO = re.compile(r"^[+-]?[0.]*[1-9]")
+
+
+def quote(raw: Any) -> str:
+    """`raw` as an error message shows it: its repr, cut to QUOTE_CHARS characters with a note of
+    how long it was (a 100 KB value must not come back in the error)."""
+    text = raw if isinstance(raw, str) else repr(raw)
+    if len(text) <= QUOTE_CHARS:
+        return repr(raw)
+    return f"{text[:QUOTE_CHARS]!r}... ({len(text)} characters)"
 
 
 class ParamError(ValueError):
@@ -167,7 +193,7 @@ def _type_name(tp: Any) -> str:
     return f"{name} | none" if opt else name
 
 
-_ARTICLE = {"int": "an int", "float": "a float", "bool": "a bool (true/false/1/0/yes/no)", "str": "a str"}
+_ARTICLE = {"int": "an int", "float": "a float", "bool": "a bool (true/false/yes/no/on/off/1/0)", "str": "a str"}
 
 
 def _expected(tp: Any) -> str:
@@ -181,15 +207,33 @@ def _expected(tp: Any) -> str:
     return f"{what} or none" if opt else what
 
 
+class _Why(ValueError):
+    """A value refused for a reason beyond its type (the message says which)."""
+
+
+class _TooLong(_Why):
+    """A value over its length limit."""
+
+
+def _number_text(raw: str) -> str:
+    s = raw.strip()
+    if len(s) > MAX_NUMBER_CHARS:
+        raise _TooLong(f"has {len(s)} characters, a number at most {MAX_NUMBER_CHARS}")
+    return s
+
+
 def _scalar(raw: Any, tp: type) -> Any:
-    """Cast one value to int, float, bool or str; raise ValueError when it does not fit."""
+    """Cast one value to int, float, bool or str, strictly (see the module doc); raise ValueError
+    when it does not fit (with a reason, when there is more to say than its type)."""
+    if isinstance(raw, str) and len(raw) > MAX_VALUE_CHARS:
+        raise _TooLong(f"has {len(raw)} characters, at most {MAX_VALUE_CHARS}")
     if tp is bool:
         if isinstance(raw, bool):
             return raw
         if isinstance(raw, int) and raw in (0, 1):
             return bool(raw)
         if isinstance(raw, str):
-            s = raw.strip().lower()
+            s = raw.strip()
             if s in _TRUE:
                 return True
             if s in _FALSE:
@@ -203,7 +247,9 @@ def _scalar(raw: Any, tp: type) -> Any:
         if isinstance(raw, float) and raw.is_integer():
             return int(raw)
         if isinstance(raw, str):
-            return int(raw.strip())
+            s = _number_text(raw)
+            if _INT.fullmatch(s):
+                return int(s)
         raise ValueError
     if tp is float:
         if isinstance(raw, bool):
@@ -211,11 +257,16 @@ def _scalar(raw: Any, tp: type) -> Any:
         if isinstance(raw, (int, float)):
             v = float(raw)
         elif isinstance(raw, str):
-            v = float(raw.strip())
+            s = _number_text(raw)
+            if not _FLOAT.fullmatch(s):
+                raise ValueError
+            v = float(s)
+            if v == 0.0 and _MANTISSA_NONZERO.match(s):
+                raise _Why("underflows to 0 (a float's smallest magnitude is about 5e-324)")
         else:
             raise ValueError
         if not math.isfinite(v):
-            raise ValueError
+            raise _Why("is not finite")
         return v
     if tp is str:
         if isinstance(raw, str):
@@ -226,7 +277,9 @@ def _scalar(raw: Any, tp: type) -> Any:
 
 def _cast(raw: Any, tp: Any) -> Any:
     inner, opt = _optional(tp)
-    if opt and (raw is None or (isinstance(raw, str) and raw.strip().lower() in _NONE)):
+    if isinstance(raw, str) and len(raw) > MAX_VALUE_CHARS:
+        raise _TooLong(f"has {len(raw)} characters, at most {MAX_VALUE_CHARS}")
+    if opt and (raw is None or (isinstance(raw, str) and raw.strip() in _NONE)):
         return None
     tup = _tuple_args(inner)
     if tup is None:
@@ -268,13 +321,19 @@ def _check(value: Any, meta: Mapping[str, Any]) -> str | None:
 
 
 def assignments(items: Iterable[str] | None, what: str = "--param") -> dict[str, str]:
-    """`["k=v", ...]` as a dict (later items win); a ParamError for an item without '='."""
+    """`["k=v", ...]` as a dict; a ParamError for an item without '=' and for a key given twice
+    (which of the two was meant cannot be guessed)."""
     out: dict[str, str] = {}
     for item in items or ():
         key, eq, value = item.partition("=")
         if not eq or not key.strip():
-            raise ParamError(f"{what} expects key=value, got {item!r}")
-        out[key.strip()] = value.strip()
+            raise ParamError(f"{what} expects key=value, got {quote(item)}")
+        key = key.strip()
+        if key in out:
+            raise ParamError(
+                f"{what} {quote(key)} is given twice ({quote(out[key])} and {quote(value.strip())}): give it once"
+            )
+        out[key] = value.strip()
     return out
 
 
@@ -290,7 +349,7 @@ def unknown_name(what: str, key: str, valid: Iterable[str]) -> str:
     valid = list(valid)
     best = suggest(key, valid)
     hint = f" (did you mean {best!r}?)" if best else ""
-    return f"unknown {what} {key!r}{hint}; valid: {', '.join(valid) if valid else '(none)'}"
+    return f"unknown {what} {quote(key)}{hint}; valid: {', '.join(valid) if valid else '(none)'}"
 
 
 def cast_values(cls: type, values: Mapping[str, Any] | Iterable[str] | None, name: str | None = None) -> dict[str, Any]:
@@ -342,12 +401,15 @@ def cast_values(cls: type, values: Mapping[str, Any] | Iterable[str] | None, nam
         tp = hints[key]
         try:
             value = _cast(raw, tp)
+        except _Why as e:
+            problems.append(f"{owner}: {key}={quote(raw)} {e}")
+            continue
         except (ValueError, TypeError, OverflowError):
-            problems.append(f"{owner}: {key}={raw!r} is not {_expected(tp)}")
+            problems.append(f"{owner}: {key}={quote(raw)} is not {_expected(tp)}")
             continue
         why = _check(value, fields[key].metadata)
         if why:
-            problems.append(f"{owner}: {key}={raw!r} {why}")
+            problems.append(f"{owner}: {key}={quote(raw)} {why}")
             continue
         out[key] = value
     if problems:

@@ -65,7 +65,7 @@ def test_a_refused_control_of_a_megabyte_gives_a_bounded_event_and_log(caplog) -
         node._apply_controls()
     events = [codec.decode(WorldEvent, p) for p in bus.puts]
     assert [e.kind for e in events] == ["control_refused"] and events[0].control_id == 7
-    assert "gain='ppp" in events[0].detail and "more characters" in events[0].detail
+    assert "gain='ppp" in events[0].detail and "(1048576 characters)" in events[0].detail
     assert all(len(p) < 2 * MAX_ECHO for p in bus.puts)
     assert caplog.records and all(len(r.getMessage()) < 2 * MAX_ECHO for r in caplog.records)
 

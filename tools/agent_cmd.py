@@ -17,7 +17,7 @@ from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DETECTORS
 from sensorimotor.agent.programs.registry import PROGRAMS, check_program_params, program_kind
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
-from sensorimotor.protocol.params import ParamError, table_text
+from sensorimotor.protocol.params import ParamError, quote, table_text
 from sensorimotor.tools.exit_guard import ExitGuard
 
 log = logging.getLogger("sme.agent")
@@ -117,8 +117,11 @@ def parse_program_params(items: list[str] | None) -> dict[str, dict[str, Any]]:
         name, _, kv = item.partition(".")
         key, eq, value = kv.partition("=")
         if not name.strip() or not key.strip() or not eq:
-            raise ParamError(f"--program-param expects PROGRAM.KEY=VALUE, got {item!r}")
-        raw.setdefault(name.strip(), {})[key.strip()] = value.strip()
+            raise ParamError(f"--program-param expects PROGRAM.KEY=VALUE, got {quote(item)}")
+        given = raw.setdefault(name.strip(), {})
+        if key.strip() in given:
+            raise ParamError(f"--program-param {quote(name.strip() + '.' + key.strip())} is given twice: give it once")
+        given[key.strip()] = value.strip()
     return check_program_params(raw)
 
 

@@ -19,7 +19,8 @@ from dataclasses import replace
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import Control, WorldEvent, WorldEventKind, WorldSpec
+from sensorimotor.protocol.messages import Control, WorldEvent, WorldEventKind, WorldSpec, clip
+from sensorimotor.protocol.params import quote
 from sensorimotor.tools.common import parse_params
 
 #: the generic kinds, which every world our node serves takes (worlds.body_changes)
@@ -256,7 +257,8 @@ def main_args(args: argparse.Namespace) -> int:
                 return 1
             bus.subscribe(keys.world_event(args.world), on_event)
             bus.put(keys.world_ctl(args.world), codec.encode(ctl), codec.schema_name(Control))
-            print(f"sent {args.kind} {dict(ctl.params) or ''} to world {args.world}".replace("  ", " "), flush=True)
+            shown = ", ".join(f"{k}={quote(v)}" for k, v in ctl.params.items())  # bounded: never a 100 KB echo
+            print(f"sent {clip(args.kind, 64)} {shown} to world {args.world}".replace("  ", " "), flush=True)
             try:
                 ev = got.get(timeout=args.timeout)
             except queue.Empty:
@@ -271,7 +273,7 @@ def main_args(args: argparse.Namespace) -> int:
         print(f"sme perturb: {e}", file=sys.stderr)
         return 2
     if ev.kind == WorldEventKind.CONTROL_APPLIED:
-        print(f"world {args.world} applied {args.kind}: {ev.detail}")
+        print(f"world {args.world} applied {args.kind}: {clip(ev.detail)}")
         return 0
-    print(f"sme perturb: world {args.world} refused {args.kind}: {ev.detail}", file=sys.stderr)
+    print(f"sme perturb: world {args.world} refused {clip(args.kind, 64)}: {clip(ev.detail)}", file=sys.stderr)
     return 1

@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from sensorimotor.protocol.messages import Control, Truth, WorldSpec
-from sensorimotor.protocol.params import ParamError, describe, format_value, parse, suggest
+from sensorimotor.protocol.params import ParamError, describe, format_value, parse, quote, suggest
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ def check_perturbation(kind: str, perturbations: Mapping[str, type], control: Co
         best = suggest(control.kind, perturbations)
         hint = f" (did you mean {best!r}?)" if best else ""
         valid = ", ".join(perturbations) or "(none)"
-        raise PerturbationError(f"{kind} has no perturbation {control.kind!r}{hint}; valid: {valid}")
+        raise PerturbationError(f"{kind} has no perturbation {quote(control.kind)}{hint}; valid: {valid}")
     name = f"{kind} {control.kind}"
     try:
         return parse(cls, dict(control.params), name=name)
@@ -237,7 +237,7 @@ class World(abc.ABC):
         """Apply a perturbation; return a one-line description of what changed. Refuse a bad one
         with a PerturbationError before changing anything (see `perturbation_params`)."""
         self.perturbation_params(control)
-        raise PerturbationError(f"world kind {self.kind!r} has no perturbation {control.kind!r}")
+        raise PerturbationError(f"world kind {self.kind!r} has no perturbation {quote(control.kind)}")
 
     def truth(self) -> Truth | None:
         """Ground truth for evaluation only (never fed to learners).

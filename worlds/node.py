@@ -38,6 +38,7 @@ from sensorimotor.protocol.messages import (
     WorldSpec,
     clip,
 )
+from sensorimotor.protocol.params import quote
 from sensorimotor.worlds.base import PerturbationError, World
 from sensorimotor.worlds.body_changes.layer import served
 from sensorimotor.worlds.lease import LeaseCounts, LeaseKeeper
@@ -232,6 +233,21 @@ class WorldNode:
         except ProtocolError as e:
             self._reject(e.kind, str(e))
             return
+        if ctl.world_id != self.world_id:  # meant for another world: applying it here would change the wrong body
+            why = f"control for world {clip(ctl.world_id, 64)!r} arrived on {self.world_id!r}'s key: not applied"
+            self._reject("spec_mismatch", why)
+            self._world_event(
+                WorldEvent(
+                    self.world_id,
+                    WorldEventKind.CONTROL_REFUSED,
+                    clip(ctl.kind, 64),
+                    why,
+                    session=self.session,
+                    timestamp=time.time(),
+                    control_id=ctl.id,
+                )
+            )
+            return
         with self._ctl_lock:
             self._controls.append(ctl)
 
@@ -297,7 +313,7 @@ class WorldNode:
                         keys.world_truth(self.world_id), self._truth_bytes, codec.schema_name(type(self.world.truth()))
                     )
             except (PerturbationError, ValueError) as e:
-                self._reject("bad_control", f"control {ctl.kind!r}: {e}")
+                self._reject("bad_control", f"control {quote(ctl.kind)}: {e}")
                 self._world_event(
                     WorldEvent(
                         self.world_id,

@@ -17,6 +17,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from sensorimotor.protocol.messages import Control
+from sensorimotor.protocol.params import quote
 from sensorimotor.worlds.base import PerturbationError, check_perturbation
 
 HOOK = "sme_perturb"
@@ -61,7 +62,7 @@ def apply(hook: Callable[[str, Any], Any] | None, kinds: Mapping[str, type], wor
     cls = kinds.get(control.kind)
     if hook is None or cls is None:
         check_perturbation(world_kind, kinds, control)  # raises, naming the valid kinds
-        raise PerturbationError(f"{world_kind} has no perturbation {control.kind!r}")
+        raise PerturbationError(f"{world_kind} has no perturbation {quote(control.kind)}")
     params: Any = dict(control.params)
     if not issubclass(cls, FreeParams):
         params = check_perturbation(world_kind, kinds, control)

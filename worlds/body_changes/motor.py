@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sensorimotor.protocol.messages import ActionSpace
+from sensorimotor.protocol.params import _scalar, quote
 from sensorimotor.worlds.base import PerturbationError
 from sensorimotor.worlds.body_changes.kinds import (
     EVERY,
@@ -143,14 +144,16 @@ def _pairs(text: str, space: ActionSpace, declared: list[tuple[int, int]] | None
         return [(i, n - 1 - i) for i in range(n // 2)]
     pairs = []
     for part in filter(None, (p.strip() for p in text.split(","))):
-        m = re.fullmatch(r"(\d+)\s*:\s*(\d+)", part)
+        m = re.fullmatch(r"([0-9]+)\s*:\s*([0-9]+)", part)
         if not m:
-            raise PerturbationError(f"reverse: pairs={text!r}: expected 'auto' or 'a:b,c:d' with actions 0..{n - 1}")
+            raise PerturbationError(
+                f"reverse: pairs={quote(text)}: expected 'auto' or 'a:b,c:d' with actions 0..{n - 1}"
+            )
         pairs.append((int(m.group(1)), int(m.group(2))))
     used = [x for p in pairs for x in p]
     if not pairs or any(not 0 <= x < n for x in used) or len(set(used)) != len(used) or any(i == j for i, j in pairs):
         raise PerturbationError(
-            f"reverse: pairs={text!r}: each pair two different actions of 0..{n - 1}, none used twice (or 'auto')"
+            f"reverse: pairs={quote(text)}: each pair two different actions of 0..{n - 1}, none used twice (or 'auto')"
         )
     return pairs
 
@@ -180,21 +183,21 @@ def _order(text: str, n: int) -> list[int]:
     t = text.strip()
     if t == "rotate":
         return [(i + 1) % n for i in range(n)]
-    m = re.fullmatch(r"(\d+)\s*:\s*(\d+)", t)
+    m = re.fullmatch(r"([0-9]+)\s*:\s*([0-9]+)", t)
     if m:
         i, j = int(m.group(1)), int(m.group(2))
         if not (0 <= i < n and 0 <= j < n and i != j):
-            raise PerturbationError(f"permute: order={text!r}: two different indices of 0..{n - 1}")
+            raise PerturbationError(f"permute: order={quote(text)}: two different indices of 0..{n - 1}")
         out = list(range(n))
         out[i], out[j] = j, i
         return out
     try:
-        out = [int(x) for x in t.split(",")]
+        out = [_scalar(x, int) for x in t.split(",")]  # the strict int of every parameter (no 1_0)
     except ValueError:
         out = []
     if sorted(out) != list(range(n)):
         raise PerturbationError(
-            f"permute: order={text!r}: expected 'rotate', 'a:b' or a permutation of 0..{n - 1} such as "
+            f"permute: order={quote(text)}: expected 'rotate', 'a:b' or a permutation of 0..{n - 1} such as "
             f"{','.join(str((i + 1) % n) for i in range(n))}"
         )
     return out
