@@ -256,3 +256,29 @@ def test_walls_make_a_map_of_ways_not_of_places():
         assert geodesic_error(w) < 0.05
     with make_world("gym:MiniGrid-LavaGapS7-v0", None, 0, {}) as w:
         assert geodesic_error(w) > 0.15
+
+
+def test_reversed_moves_are_a_detected_drop_and_the_model_relearns():
+    """The model learner at the defaults on FrozenLake 4x4 (not slippery): moves reversed at step
+    10,000 (the test swaps each move with its opposite) are one detected drop within 500 steps, the
+    model is dropped and learned again, and the relearned map is as good as the first."""
+    from sensorimotor.agent.detectors import make_detector
+    from sensorimotor.protocol.messages import EventKind
+
+    with make_world("gym:FrozenLake-v1", None, 0, {"is_slippery": "false"}) as w:
+        program = make_program(w.spec(), 0)
+        now, step = [0], w.step
+
+        def maybe_reversed(action, step=step):
+            if now[0] >= 10_000:
+                action = np.asarray([(int(np.asarray(action).reshape(-1)[0]) + 2) % 4])
+            return step(action)
+
+        w.step = maybe_reversed  # type: ignore[method-assign]
+        detector = make_detector("cusum", **program.detector_params)
+        run = run_inprocess(w, program, 30_000, detector=detector, on_step=lambda k, obs: now.__setitem__(0, k))
+    drops = [e.step for e in run.events(EventKind.DROP_DETECTED)]
+    assert len(drops) == 1 and 10_000 < drops[0] <= 10_500, drops
+    relearned = [e for e in run.embeddings if e.trigger == "relearned"]
+    assert relearned and relearned[0].drop_step == drops[0] and relearned[0].procrustes_error < 0.1
+    assert program.learner == "model"
