@@ -57,9 +57,12 @@ mean traces (`mean_trace`, the default for discrete actions: `auto`); the embedd
 every start takes the world back to one trace per start.
 
 Phases alternate: *learn* until `samples_per_iteration` new samples (LSPI: then features are
-refitted and LSPI iterates off the act path) or `embed_every` steps (Sarsa, which learns on every
-step); *embed*: the greedy policy from each start state (`StartStateSweep`), trace distances,
-classical MDS, Embedding vN. Until the policy is *watched* every sweep's policy is published
+refitted and LSPI iterates off the act path; a table learner: a plan, swept only once the model is
+complete and its greedy policy changed, or once watched) or `embed_every` steps (Sarsa, which
+learns on every step); *embed*: the greedy policy from each start state (`StartStateSweep`), trace
+distances, classical MDS, Embedding vN. A sweep that repeats the accepted traces once watched
+publishes nothing: every version is a new map. Which policy is better is decided by the pure rules
+of `agent.programs.acceptance`. Until the policy is *watched* every sweep's policy is published
 and accepted in a deterministic world; in a stochastic one only a policy better beyond the noise of
 the sampled goal fractions (1.64 standard errors) is. A sweep that reaches the goal from
 `watch_after` of the starts makes the policy watched; so does, in a stochastic world, an accepted
