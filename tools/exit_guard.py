@@ -96,7 +96,7 @@ class ExitGuard:
                     return
                 if ready and not self._closed.is_set():
                     signums = os.read(rfd, 64)
-                    self.fire(f"{_names(signums) or 'a signal'} received")
+                    self.fire(f"{_names(signums) or 'a signal'} received", logging.INFO)  # asked to stop: a normal end
                     return
             else:
                 time.sleep(POLL)
@@ -104,12 +104,13 @@ class ExitGuard:
                 self.fire(f"its agent (pid {self.parent_pid}) is gone")
                 return
 
-    def fire(self, why: str) -> None:
-        """Ask for the clean stop now and end the process `grace` seconds later (once)."""
+    def fire(self, why: str, level: int = logging.WARNING) -> None:
+        """Ask for the clean stop now and end the process `grace` seconds later (once); said at
+        `level` (a signal asking to stop is a normal end, an agent gone is not)."""
         if self._fired.is_set():
             return
         self._fired.set()
-        log.warning("%s: %s; stopping (ends within %g s)", self.who, why, self.grace)
+        log.log(level, "%s: %s; stopping (ends within %g s)", self.who, why, self.grace)
         try:
             self.stop()
         except Exception:  # noqa: BLE001 - the deadline below still holds
