@@ -22,8 +22,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from sensorimotor.protocol import keys
+from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusMessage
+from sensorimotor.protocol.errors import ProtocolError
+from sensorimotor.protocol.messages import Embedding
 from sensorimotor.tools.bench.procstat import TICKS_PER_S as TICK
 from sensorimotor.tools.bench.procstat import proc_sample
 from sensorimotor.tools.common import free_port, require
@@ -98,10 +100,19 @@ def run(minutes: float, out: Path, every: float = 20.0, keep_recording: bool = F
     ]
     samples: list[dict[str, Any]] = []
     counts: dict[str, int] = {}
+    versions: dict[str, int] = {}  # the highest embedding version heard per world
+    repeats: dict[str, int] = {}  # versions heard that were not above the highest before them
 
     def on_embedding(msg: BusMessage) -> None:
         wid = keys.world_of(msg.key)
         counts[wid] = counts.get(wid, 0) + 1
+        try:
+            v = int(codec.decode(Embedding, msg.payload).version)
+        except ProtocolError:
+            return
+        if wid in versions and v <= versions[wid]:
+            repeats[wid] = repeats.get(wid, 0) + 1
+        versions[wid] = max(v, versions.get(wid, v))
 
     try:
         with Bus(BusConfig.for_role("world", ep), wait_limit=120) as bus, open(out / "soak.jsonl", "w") as jl:
@@ -123,6 +134,8 @@ def run(minutes: float, out: Path, every: float = 20.0, keep_recording: bool = F
                     "t": round(now - t0, 1),
                     "embeddings_per_min": round((total - last_total) * 60 / dt, 2) if dt > 0 else 0.0,
                     "embeddings": dict(counts),
+                    "versions": dict(versions),
+                    "version_repeats": dict(repeats),
                     "procs": {},
                 }
                 for p in procs:
@@ -186,6 +199,9 @@ def summarize(samples: list[dict[str, Any]], procs: list[Proc], minutes: float) 
         "samples": len(samples),
         "warmup_s": WARMUP_S if base is not None and base["t"] >= WARMUP_S else (base["t"] if base else None),
         "embeddings": dict(samples[-1]["embeddings"]) if samples else {},
+        # embedding versions never repeat nor go back (per world: the highest heard, and how many were not above it)
+        "versions": dict(samples[-1].get("versions", {})) if samples else {},
+        "version_repeats": sum(samples[-1].get("version_repeats", {}).values()) if samples else 0,
         "embeddings_per_min": round(total / (samples[-1]["t"] / 60), 2) if samples and samples[-1]["t"] else 0.0,
         "procs": per,
     }
@@ -231,7 +247,9 @@ def main(minutes: float, out: str, every: float = 20.0, keep_recording: bool = F
             f"CPU {p['cpu_pct_mean']} %, error/warning lines {p['error_warning_lines']}"
         )
     print(f"embeddings: {summary['embeddings']} ({summary['embeddings_per_min']}/min); files in {out}")
+    print(f"embedding versions: highest {summary['versions']}, not above the one before: {summary['version_repeats']}")
     # 130 / -SIGINT: a process still starting up when the soak stopped it with SIGINT
     stopped = (0, 130, -signal.SIGINT, None)
     ok = all(p["alive_at_end"] and p["exit_code"] in stopped for p in summary["procs"].values())
+    ok = ok and summary["version_repeats"] == 0
     return 0 if ok else 1
