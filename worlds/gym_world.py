@@ -25,7 +25,7 @@ Start states and truth come from the first of these that fits:
   `start_grid` grid over two state variables, truth those variables scaled to 0..1;
 * MiniGrid: every free cell the agent can stand on (facing east, or in all four headings with
   `headings=4`), truth the cell; the layout is the one the world's seed draws, at every reset
-  (LavaGap's gap, SimpleCrossing's walls), and a grid larger than the agent's view is served whole
+  (LavaGap's gap, SimpleCrossing's walls), and a room longer than the agent sees ahead is served whole
   (`view`);
 * panda-gym reach tasks: the target held at the middle of its range, start states a lattice of
   hand positions (`start_grid` per axis, at most 4) reached by inverse kinematics, truth the hand
@@ -101,7 +101,8 @@ class GymWorldParams:
         "MiniGrid: what the agent sees - full (the whole grid, MiniGrid's own FullyObsWrapper: one "
         "observation per cell and heading) or agent (its egocentric view ahead, which shows cells of a "
         "room wider than the view alike, so the same observation and action lead to different places); "
-        "auto: full when the grid is wider or taller than the agent's view, else agent",
+        "auto: full when the room inside the walls is longer than the agent sees ahead (6 cells by default: "
+        "Empty-16x16, SimpleCrossingS9), else agent",
         choices=("auto", "full", "agent"),
     )
     headings: int = option(
@@ -687,12 +688,14 @@ class GymWorld(World):
         return f"{len(self._starts)} start states from the environment's own hook"
 
     def _wants_full_view(self) -> bool:
-        """MiniGrid: serve the whole grid (`view`; auto: when the grid is larger than the agent's view)."""
+        """MiniGrid: serve the whole grid (`view`; auto: when the room inside the walls is longer than
+        the agent sees ahead, `agent_view_size` - 1 cells: then cells far from every wall look alike).
+        The whole grid costs a quarter of the world's step rate (it is encoded at every step)."""
         if self.params.view != "auto":
             return self.params.view == "full"
         u: Any = self.u
-        side = int(getattr(u, "agent_view_size", 7))
-        return max(int(getattr(u, "width", 0)), int(getattr(u, "height", 0))) > side
+        ahead = int(getattr(u, "agent_view_size", 7)) - 1
+        return max(int(getattr(u, "width", 0)), int(getattr(u, "height", 0))) - 2 > ahead
 
     def _minigrid_starts(self) -> str:
         u: Any = self.u
