@@ -264,7 +264,7 @@ SOURCES["bench-scale-work"] = Source(
     command_output,
 )
 SOURCES["bench-soak"] = Source(
-    "sme bench soak --minutes 15 --out DIR  # its lines after the JSON summary (kept as summary.json beside)",
+    "sme bench soak --minutes 30 --out DIR  # its lines after the JSON summary (kept as summary.json beside)",
     "results/bench-soak/output.txt",
     command_output,
 )
