@@ -92,6 +92,9 @@ from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.agent.learners.lspi_features import RBFFeatures, basis_state, iterate_job, set_basis
 from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
 from sensorimotor.agent.learners.motor_map import MotorMap
+from sensorimotor.agent.learners.reach import ReachLearner, state_sensors
+from sensorimotor.agent.learners.reach import fits as reach_fits
+from sensorimotor.agent.learners.reach import plan_job as reach_plan_job
 from sensorimotor.agent.learners.registry import outside_learners, table_learner_class
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.learners.tabular_model import TabularModel
@@ -151,6 +154,8 @@ class GenericProgram(Program):
             learner = (
                 "model"
                 if ids or symbols
+                else "reach"
+                if reach_fits(spec)
                 else "planner"
                 if box and (d <= prm.planner_max_dims or frames)
                 else "sarsa"
@@ -192,7 +197,8 @@ class GenericProgram(Program):
         self._motor_prev: tuple[np.ndarray, int] | None = None
         basis: Any
         self.sarsa: SarsaLambda | None = None
-        self.planner: ModelPlanner | None = None
+        self.planner: ModelPlanner | ReachLearner | None = None
+        self._reach_sensors: list[str] = []  # reach: the short vectors it plans over (the others unread)
         self.model: TableLearner | None = None
         if self.tabular:
             if ids:
@@ -228,6 +234,25 @@ class GenericProgram(Program):
             basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
             # per-value ranges, measured over the first `sarsa_warmup` random steps: a sensor's one
             # declared range may span values of very different scales (position and velocity)
+            self._seen_lo = np.full(d, np.inf)
+            self._seen_hi = np.full(d, -np.inf)
+            self._warm = 0
+        elif learner == "reach":  # many action dimensions, a short state vector (agent.learners.reach)
+            self.n_states = 0
+            self._reach_sensors = state_sensors(spec)
+            if not self._reach_sensors:
+                raise SpecMismatch(
+                    f"generic program: learner reach needs a sensor of at most 16 continuous values; world "
+                    f"{spec.world_id} has {', '.join(s.name for s in spec.sensors)}"
+                )
+            chosen = [s for s in spec.sensors if s.name in self._reach_sensors]
+            lo = np.concatenate([np.full(int(np.prod(s.shape)), s.low, float) for s in chosen])
+            hi = np.concatenate([np.full(int(np.prod(s.shape)), s.high, float) for s in chosen])
+            d = lo.size
+            self._lo, self._span = lo, np.where(hi > lo, hi - lo, 1.0)
+            self._raw_lo, self._raw_span = self._lo, self._span
+            self.planner = ReachLearner(d, self.n_actions, seed=int(self.rng.integers(2**31)))
+            basis = TabularBasis(1, self.n_actions)  # unused: LSPI keeps the program's shape uniform
             self._seen_lo = np.full(d, np.inf)
             self._seen_hi = np.full(d, -np.inf)
             self._warm = 0
@@ -344,8 +369,11 @@ class GenericProgram(Program):
             "sarsa": f"tile-coded Sarsa(lambda), {self.sarsa.coder.dims if self.sarsa else 0} values"
             + (", hashed tiles" if self.sarsa and self.sarsa.coder.hashed else ""),
             "lspi": "LSPI over PCA + RBF features",
+            "reach": "a learned move per action over the sensors "
+            + ", ".join(self._reach_sensors)
+            + ", steps toward the goal states met",
             "planner": f"a learned local-linear model and interpolated value iteration, "
-            f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes"
+            f"{getattr(self.planner, 'grid', 0)}^{self.planner.dims if self.planner else 0} nodes"
             + (", over motor coordinates of the frames" if self.motor else ""),
         }.get(
             self.learner,
@@ -378,6 +406,8 @@ class GenericProgram(Program):
     def _flat(self, obs: Observation) -> np.ndarray:
         parts = []
         for s in self.spec.sensors:
+            if self._reach_sensors and s.name not in self._reach_sensors:
+                continue
             a = obs.tensors.get(s.name)
             if a is None:
                 raise SpecMismatch(f"observation step {obs.step} has no tensor {s.name!r}")
@@ -792,7 +822,7 @@ class GenericProgram(Program):
             embed_job,
             traces=per_start,
             reached=[list(flags[i * k : (i + 1) * k]) for i in range(n)],
-            actions=None if self.discrete else self.actions.copy(),
+            actions=None if self.discrete or self.learner == "reach" else self.actions.copy(),
             dims=self.dims,
             estimator=self.estimator,
             distance=prm.distance,
@@ -936,7 +966,8 @@ class GenericProgram(Program):
             if due and not self.background.pending("plan"):
                 self._fresh = False
                 self._since_plan = 0
-                self.background.submit("plan", plan_job, **self.planner.job_args())
+                job = reach_plan_job if isinstance(self.planner, ReachLearner) else plan_job
+                self.background.submit("plan", job, **self.planner.job_args())
         self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
 
     def _learn_planner(self, obs: Observation) -> Decision:
