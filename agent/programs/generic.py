@@ -21,6 +21,11 @@ The learner follows the observation (`learner=auto`; the attach event says which
 * ``sarsa`` - a continuous observation of at most `sarsa_max_dims` values: tile-coded Sarsa(lambda)
   with optimistic initial values (the classic mountain-car recipe, ch. 8's CMAC; hashed tiles above
   `memory`), which explores toward sparse goals by itself.
+* ``reach`` - an action of 5 or more dimensions (a box's, or a discrete space's pairs of +-moves: an
+  arm commanded in 6 or 7 joints) and a sensor of at most 16 continuous values (its joint angles):
+  each action's mean move of that vector, the goal states met, and steps toward their medoid, the
+  joints moved one after another (`agent.learners.reach`); the other sensors are not read. Box
+  actions of more than 4 dimensions are coded per axis (2 per dimension), not as a product.
 * ``planner`` - a continuous observation of at most `planner_max_dims` values and a box action of
   two or more dimensions (whose discretised table is a product of moves: 27 for three): a model of
   each action's effect, linear in the action and fitted per node of a grid over the observation,
