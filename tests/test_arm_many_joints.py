@@ -65,6 +65,10 @@ def test_reach_learner_moves_toward_the_medoid_of_the_goal_states_one_joint_afte
     q = learner.q(np.array([0.5, 0.5, 0.5]))
     assert q.tolist() == [1.0, -1.0, -1.0, -1.0, -1.0, 1.0]  # joint 0 up or joint 2 down; joint 1 is there
     frozen = learner.w.copy()
+    copy = ReachLearner(3, 6, seed=1, params=ReachParams(ridge=0.0))
+    copy.restore(learner.state())  # saved as explicit arrays and values
+    assert np.array_equal(copy.w, frozen) and copy.act(x) == learner.act(x)
+    assert not copy.observe(goals[1] - moves[0], 0, goals[1], "goal")  # the goal states met are kept
     learner.reset()
     assert learner.target is None and not np.any(learner.q(x))  # no goal known: every action alike
     assert np.array_equal(learner.q(x, frozen), q)  # a kept plan is followed as it was

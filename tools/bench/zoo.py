@@ -68,8 +68,8 @@ def _arms() -> tuple[ZooWorld, ...]:
     """Arms commanded in 6 and 7 joints (`sme world arm`, docs/arm.md): 128 sampled start poses each,
     the joints' angles served beside the camera (the arm world's default from 5 joints)."""
     return (
-        ZooWorld("Arm Kuka iiwa, 7 joints", "arm", {"n_joints": "7"}, {}, 100_000, 20_000),
-        ZooWorld("Arm xArm6, 6 joints", "arm", {"urdf": "xarm/xarm6_robot.urdf", "n_joints": "6"}, {}, 50_000, 20_000),
+        ZooWorld("Arm Kuka iiwa, 7 joints", "arm", {"n_joints": "7"}, {}, 30_000, 12_000),
+        ZooWorld("Arm xArm6, 6 joints", "arm", {"urdf": "xarm/xarm6_robot.urdf", "n_joints": "6"}, {}, 20_000, 12_000),
     )
 
 
