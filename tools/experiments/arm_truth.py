@@ -41,7 +41,8 @@ def measure(
 ) -> dict[str, Any]:
     """The errors of both goals' maps (see the module docstring); `poses` lattice poses drawn to find
     the configurations that put the hand near the goal's."""
-    with ArmWorld(seed=0, urdf=urdf, n_joints=n_joints, image=16, goal_image=32) as w:
+    w = ArmWorld(seed=0, urdf=urdf, n_joints=n_joints, image=16, goal_image=32)
+    with w:
         grid = np.array(w._grid)
         k = np.arange(len(grid))
         idx = np.array([[int(np.argmin(np.abs(grid[j] - a))) for j, a in enumerate(q)] for q in w.poses])
