@@ -80,6 +80,11 @@ def test_a_five_joint_arm_is_learned_from_sampled_starts(tmp_path):
         assert spec.n_starts == 128 and spec.params["truth_dims"] == "5"
         program = GenericProgram(spec, seed=0, embed_every=1500, sarsa_warmup=300)
         run = run_inprocess(w, program, 6000, stop_when=lambda r: len(r.embeddings) >= 1)
+        again = GenericProgram(spec, seed=0, embed_every=1500, sarsa_warmup=300)
+    again.restore(program.state())  # a checkpoint keeps the learned moves, goal states and ranges
+    assert isinstance(again.planner, ReachLearner) and isinstance(program.planner, ReachLearner)
+    assert np.array_equal(again.planner.w, program.planner.w) and np.array_equal(again._lo, program._lo)
+    assert len(again.planner.goals) == len(program.planner.goals) > 0
     assert program.learner == "reach"
     e = run.embeddings[0]
     assert e.metrics["goal_reached_fraction"] == 1.0  # (seed 0: 0.104 at step 2,875)
