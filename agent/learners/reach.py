@@ -47,6 +47,12 @@ class ReachParams:
     resolution: float = option(
         0.25, "predicted improvements closer than this (in steps) are ties (the model is no finer)", min=1e-6
     )
+    keep: float = option(
+        0.1,
+        "the target stays while its summed distance to the goal states is within this fraction of the "
+        "medoid's (a target that moves with every goal state met would change every trace)",
+        min=0.0,
+    )
 
 
 def state_sensors(spec: Any) -> list[str]:
@@ -65,20 +71,34 @@ def fits(spec: Any) -> bool:
     return dims >= MIN_ACTION_DIMS and bool(state_sensors(spec))
 
 
-def medoid(goals: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """The goal state with the least summed distance (in steps, per-dimension `scale`) to the others."""
+def medoid(goals: np.ndarray, scale: np.ndarray, current: np.ndarray | None = None, keep: float = 0.0) -> np.ndarray:
+    """The goal state with the least summed distance (in steps, per-dimension `scale`) to the others;
+    `current` instead while its own summed distance is within `keep` of that least one."""
     g = goals / scale
     cost = np.abs(g[:, None, :] - g[None, :, :]).sum(axis=(1, 2))
-    return goals[int(np.argmin(cost))]
+    best = int(np.argmin(cost))
+    if current is not None:
+        mine = float(np.abs(g - current / scale).sum())
+        if mine <= (1.0 + keep) * float(cost[best]) + 1e-12:
+            return current
+    return goals[best]
 
 
-def plan_job(counts: np.ndarray, sums: np.ndarray, goals: np.ndarray, ridge: float) -> dict[str, Any]:
-    """Fit each action's mean move and find the goal states' medoid (a pure function, run off the
-    act path). `scale` is each dimension's step: the largest move any action makes along it."""
+def plan_job(
+    counts: np.ndarray,
+    sums: np.ndarray,
+    goals: np.ndarray,
+    ridge: float,
+    target: np.ndarray | None = None,
+    keep: float = 0.0,
+) -> dict[str, Any]:
+    """Fit each action's mean move and find the goal states' medoid, keeping `target` while it is
+    nearly as central (a pure function, run off the act path). `scale` is each dimension's step: the
+    largest move any action makes along it."""
     W = sums / (counts[:, None] + ridge)
     scale = np.abs(W).max(axis=0)
     scale = np.where(scale > 1e-9, scale, 1.0)
-    target = medoid(goals, scale) if len(goals) else None
+    target = medoid(goals, scale, target, keep) if len(goals) else None
     return {"W": W, "scale": scale, "target": target}
 
 
@@ -141,6 +161,8 @@ class ReachLearner:
             "sums": self.sums.copy(),
             "goals": self.goals.copy(),
             "ridge": self.params.ridge,
+            "target": None if self.target is None else self.target.copy(),
+            "keep": self.params.keep,
         }
 
     def install(self, plan: dict[str, Any]) -> None:
