@@ -64,6 +64,9 @@ def test_reach_learner_moves_toward_the_medoid_of_the_goal_states_one_joint_afte
     assert np.allclose(learner.target, [0.7, 0.5, 0.3]) and np.allclose(medoid(goals, learner.scale), learner.target)
     q = learner.q(np.array([0.5, 0.5, 0.5]))
     assert q.tolist() == [1.0, -1.0, -1.0, -1.0, -1.0, 1.0]  # joint 0 up or joint 2 down; joint 1 is there
+    line = np.arange(4.0)[:, None]  # summed distances 6, 4, 4, 6
+    assert medoid(line, np.ones(1)) == 1.0 and medoid(line, np.ones(1), np.array([2.0]), 0.1) == 2.0  # kept
+    assert medoid(line, np.ones(1), np.array([0.0]), 0.1) == 1.0  # 6 > 1.1 x 4: the target moves
     frozen = learner.w.copy()
     copy = ReachLearner(3, 6, seed=1, params=ReachParams(ridge=0.0))
     copy.restore(learner.state())  # saved as explicit arrays and values
