@@ -90,5 +90,5 @@ def test_a_five_joint_arm_is_learned_from_sampled_starts(tmp_path):
     assert len(again.planner.goals) == len(program.planner.goals) > 0
     assert program.learner == "reach"
     e = run.embeddings[0]
-    assert e.metrics["goal_reached_fraction"] == 1.0  # (seed 0: 0.104 at step 2,875)
+    assert e.metrics["goal_reached_fraction"] == 1.0  # (seed 0: 0.089 at step 2,843)
     assert e.procrustes_error is not None and e.procrustes_error < 0.15, e.procrustes_error
