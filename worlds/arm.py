@@ -77,7 +77,7 @@ class ArmWorldParams:
     goal_steps: int | None = option(
         None,
         "the goal is reached with every moving joint within this many steps (and a half) of the goal pose; "
-        "none: 0 up to 4 moving joints, 1 beyond (one pose of a 7-joint lattice is too few to find)",
+        "none: 0 up to 4 moving joints, 1 beyond (a single pose of a 7-joint lattice is too rare to be found)",
         min=0,
         max=3,
     )
