@@ -39,12 +39,7 @@ import numpy as np
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import (
-    AgentEvent,
-    AgentStatus,
-    LinkStatus,
-    WorldSpec,
-)
+from sensorimotor.protocol.messages import AgentEvent, AgentStatus, LinkStatus, WorldSpec
 from sensorimotor.tools.bench.fuzz_messages import (
     BIG_EVERY,
     CATEGORIES,

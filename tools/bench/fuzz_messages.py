@@ -10,12 +10,7 @@ from sensorimotor.agent.link import check_against_spec, check_truth
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol import sme_v1_pb2 as pb
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
-from sensorimotor.protocol.messages import (
-    Observation,
-    Truth,
-    WorldEvent,
-    WorldSpec,
-)
+from sensorimotor.protocol.messages import Observation, Truth, WorldEvent, WorldSpec
 from sensorimotor.tools.bench.fuzz_status import GOOD
 
 # category -> (weight, the agent counter expected to count it; "rejected" = the good link's rejections)

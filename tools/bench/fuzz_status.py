@@ -15,12 +15,7 @@ from typing import IO, Any
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import (
-    AgentEvent,
-    AgentStatus,
-    LinkStatus,
-    clip,
-)
+from sensorimotor.protocol.messages import AgentEvent, AgentStatus, LinkStatus, clip
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 GOOD = "good"

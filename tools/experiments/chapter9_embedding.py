@@ -10,11 +10,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, procrustes_error, trace_distances
-from sensorimotor.agent.embedding.probabilistic import (
-    mean_pair_distances,
-    mode_distances,
-    sample_until_settled,
-)
+from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mode_distances, sample_until_settled
 from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.tools.experiments.scoring import score_points
 from sensorimotor.worlds.gridworld import GridWorld
