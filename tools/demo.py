@@ -115,7 +115,10 @@ def change_summary(
     if drop is None:
         lines.append("  not noticed within the run (no reward drop detected after it)")
         return lines
-    when = f", {drop.timestamp - seconds:.2f} s" if seconds is not None and drop.timestamp else ""
+    when = ""
+    if seconds is not None and drop.timestamp:
+        dt = max(0.0, drop.timestamp - seconds)
+        when = f", {dt * 1000:.0f} ms" if dt < 1 else f", {dt:.1f} s"
     lines.append(f"  noticed at step {drop.step:,}: {drop.step - at:,} steps{when} after the change ({drop.detail})")
     before = [e for e in embeddings if e.step <= at and e.procrustes_error is not None]
     again = next((e for e in embeddings if e.trigger == Trigger.RELEARNED and e.step >= drop.step), None)

@@ -375,14 +375,82 @@ def select(only: list[str] | None) -> list[ZooWorld]:
 
 
 def pick_changes(names: list[str] | None) -> list[Change]:
-    """The changes named (by label or kind), or every one."""
+    """The changes named (by label or kind; `none`: the unperturbed run alone), or every one."""
     if not names:
         return list(CHANGES)
+    if [n.lower() for n in names] == ["none"]:
+        return []
     out = [c for c in CHANGES if any(n.lower() in (c.label.lower(), c.kind) for n in names)]
     unknown = [n for n in names if not any(n.lower() in (c.label.lower(), c.kind) for c in CHANGES)]
     if unknown:
-        raise UsageError(f"no change {', '.join(unknown)}; valid: {', '.join(c.label for c in CHANGES)}")
+        raise UsageError(f"no change {', '.join(unknown)}; valid: {', '.join(c.label for c in CHANGES)}, none")
     return out
+
+
+def command(world: str, change: str, seeds: int) -> str:
+    """The command that gives one row of the table alone."""
+    c = "none" if change == NONE.label else change
+    q = lambda t: f'"{t}"' if " " in t else t  # noqa: E731
+    return f"sme bench changes --world {q(world)} --change {q(c)} --seeds {seeds}"
+
+
+def render_scorecard(src: Any, text: str) -> str:
+    """The docs' table (tools/results_doc.py): one row per (world, change) summary line of the kept
+    output, each with the command that gives it alone."""
+    rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
+    head = (
+        "| world | change | harm | missed / harmful | delay: steps | sweeps | ADWIN | Page-Hinkley | ours / ADWIN "
+        "| false alarms / 100k steps | steps to relearned | relearned error (before) | within 1.5x | command |"
+    )
+    out = [head, "|" + "---|" * head.count(" | ") + "---|"]
+
+    def f(v: Any, nd: int = 3) -> str:
+        return "-" if v is None else f"{v:,.{nd}g}" if isinstance(v, float) and abs(v) < 1000 else f"{v:,.0f}"
+
+    for r in rows:
+        if not r.get("summary"):
+            continue
+        cmd = f"`{command(r['world'], r['change'], r['seeds'])}`"
+        if r["change"] == NONE.label:
+            out.append(
+                f"| {r['world']} | {r['change']} | | | | | | | | {f(r['false_alarms_per_100k'])} "
+                f"in {r['unperturbed_steps']:,} | | | | {cmd} |"
+            )
+            continue
+        out.append(
+            f"| {r['world']} | {r['change']} | {f(r['harm'], 2)} | {r['missed']} / {r['harmful']} "
+            f"| {f(r['delay_steps'])} | {f(r['delay_sweeps'], 2)} | {f(r['adwin_delay_sweeps'], 2)} "
+            f"| {f(r['page_hinkley_delay_sweeps'], 2)} | {f(r['ours_over_adwin'], 2)} "
+            f"| {f(r['false_alarms_per_100k'])} in {r['unperturbed_steps']:,} | {f(r['steps_to_relearned'])} "
+            f"| {f(r['relearned_error'])} ({f(r['error_before'])}) | {r['relearned_within_1.5x']} of {r['detected']} "
+            f"| {cmd} |"
+        )
+    return "\n".join(out) + f"\n\nFrom `{src.command}` (its output: `docs/{src.file}`)."
+
+
+def render_life(src: Any, text: str) -> str:
+    """The docs' table of the life of changes: one row per world and seed."""
+    rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
+    out = [
+        "| world | seed | changes | noticed | relearned | steps to relearn: first | last | last / first "
+        "| median delay (steps) | RSS at the first change | growth to the end | versions not rising |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def g(v: Any) -> str:
+        return "-" if v is None else f"{v:,}"
+
+    for r in rows:
+        if not r.get("life"):
+            continue
+        growth = "-" if r["rss_growth"] is None else f"{100 * r['rss_growth']:.1f} %"
+        out.append(
+            f"| {r['world']} | {r['seed']} | {r['changes']} | {r['detected']} | {r['relearned']} "
+            f"| {g(r['first_steps_to_relearn'])} | {g(r['last_steps_to_relearn'])} | {g(r['last_over_first'])} "
+            f"| {g(r['median_delay'])} | {r['rss_first_change_mb']} MB | {growth} "
+            f"| {r['versions_repeat']} of {r['versions']} |"
+        )
+    return "\n".join(out) + f"\n\nFrom `{src.command}` (its output: `docs/{src.file}`)."
 
 
 def _run_task(task: tuple[ZooWorld, Change, int, Budget]) -> dict[str, Any]:
@@ -408,7 +476,7 @@ def main(
         if z.needs and importlib.util.find_spec(z.needs) is None:
             print(f"changes: {z.label}: skipped ({z.needs} is not installed)", file=sys.stderr)
             continue
-        chosen = pick_changes(changes) + ([NONE] if quiet else [])
+        chosen = pick_changes(changes) + ([NONE] if quiet or changes == ["none"] else [])
         tasks += [(z, c, s, budget) for c in chosen for s in range(seeds)]
     pool = mp.get_context("spawn").Pool(workers) if workers > 1 and len(tasks) > 1 else None
     rows: list[dict[str, Any]] = []
