@@ -3,7 +3,7 @@
 One seeded in-process run per world: the generic program learns; then N changes come one after the
 other, each once the change before was relearned (a relearned version published) and the detector
 warmed up again, or its budget ran out. Odd changes are drawn by the seed from the kinds that break
-a learned policy and can be relearned (reverse, permute rotate, permute of two actions); even ones
+a learned policy and can be relearned (reverse, every action moved one place on or back); even ones
 are `restore` (the body as it was: a change too, which the policy relearned for the other body
 does not survive). Per change: detection delay, steps to the relearned map and its error; per run:
 changes detected, the last change's steps to relearn over the first's, the process's RSS growth
@@ -65,14 +65,15 @@ class LifeBudget:
 
 
 def draw(rng: np.random.Generator, n_actions: int) -> tuple[str, dict[str, str]]:
-    """A change that breaks a learned policy and can be relearned, drawn by `rng`."""
+    """A change that breaks a learned policy and can be relearned, drawn by `rng`: reverse, or every
+    action moved one place on (rotate) or back (a policy that uses a few of many actions - MiniGrid's
+    left, right, forward of seven - survives an exchange of two others, and no change would be seen)."""
     pick = int(rng.integers(3))
     if pick == 0:
         return "reverse", {}
     if pick == 1 or n_actions < 2:
         return "permute", {"order": "rotate"}
-    a, b = (int(x) for x in rng.choice(n_actions, size=2, replace=False))
-    return "permute", {"order": f"{a}:{b}"}
+    return "permute", {"order": ",".join(str((i - 1) % n_actions) for i in range(n_actions))}
 
 
 @dataclass
