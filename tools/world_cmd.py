@@ -43,6 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the world's random generator")
     p.add_argument(
+        "--robot", default=None, metavar="FILE", help="ros2: the robot file (TOML) mapping its topics (docs/ros2.md)"
+    )
+    p.add_argument(
         "--external",
         action="store_true",
         help="leave the world to an outside controller (a Gymnasium BusEnv, see the README): the spec "
@@ -108,6 +111,8 @@ def main_args(args: argparse.Namespace) -> int:
         return 2
     try:
         params = assignments(args.param)
+        if args.robot is not None:
+            params["robot"] = args.robot
         world_kind(args.name)
     except ParamError as e:
         print(f"sme world: {e}", file=sys.stderr)
@@ -138,6 +143,9 @@ def main_args(args: argparse.Namespace) -> int:
             external=args.external,
             lease_ttl=args.lease_ttl,
         )
+        offer = getattr(world, "offer_embeddings", None)  # a ROS 2 robot: embeddings on a ROS 2 topic too
+        if offer is not None:
+            offer(bus, node.world_id)
         node.install_signal_handlers()
         stats = node.run()
     summary = stats.summary()

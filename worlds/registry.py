@@ -82,6 +82,12 @@ WORLDS: dict[str, WorldKind] = {
         "objectpose", "ObjectPoseWorld", "ObjectPoseWorldParams", "a textured box turned in pitch and yaw (ch. 6)"
     ),
     "arm": WorldKind("arm", "ArmWorld", "ArmWorldParams", "a robot arm from any URDF, seen by a fixed camera"),
+    "ros2": WorldKind(
+        "ros2.world",
+        "Ros2World",
+        "Ros2WorldParams",
+        "a ROS 2 robot over rmw_zenoh, mapped by a robot file (--robot FILE.toml)",
+    ),
     "bench": WorldKind("bench", "BenchWorld", "BenchWorldParams", "fixed-size observation for `sme bench loop`"),
 }
 
