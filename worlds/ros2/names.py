@@ -59,17 +59,18 @@ def topic_key(domain: int, topic: str, ros_type: str, type_hash: str) -> str:
 
 @dataclass(frozen=True)
 class Qos:
-    """The QoS a token declares. Defaults are rmw's default profile (reliable, volatile, keep last
-    10), written as empty fields; rmw enum values: reliability 1 reliable / 2 best effort,
-    durability 1 transient local / 2 volatile, history 1 keep last / 2 keep all."""
+    """The QoS a token declares. rmw_zenoh writes a field that equals its own default (reliable,
+    volatile, keep last 42; `qos.cpp`) as empty; rmw enum values: reliability 1 reliable / 2 best
+    effort, durability 1 transient local / 2 volatile, history 1 keep last / 2 keep all."""
 
     reliability: int = 1
     durability: int = 2
     history: int = 1
-    depth: int = 10
+    depth: int = 42
 
     def text(self) -> str:
-        """The token's QoS chunk, e.g. ``::,:,:,:,,`` for the default, ``2::,5:,:,:,,`` for sensor data."""
+        """The token's QoS chunk, e.g. ``::,10:,:,:,,`` for rclcpp's default profile (keep last 10),
+        ``2::,5:,:,:,,`` for sensor data (best effort, keep last 5)."""
         d = Qos()
 
         def f(v: int, dv: int) -> str:
@@ -97,7 +98,7 @@ class Qos:
             raise WireNameError(f"QoS {text!r} has a field that is not a number") from None
 
 
-DEFAULT_QOS = Qos()
+DEFAULT_QOS = Qos(depth=10)  # rclcpp's default profile: reliable, volatile, keep last 10
 SENSOR_QOS = Qos(reliability=2, depth=5)  # rclcpp's SensorDataQoS
 
 
@@ -118,7 +119,7 @@ class Entity:
     topic: str = ""
     ros_type: str = ""
     type_hash: str = ""
-    qos: Qos = Qos()
+    qos: Qos = DEFAULT_QOS
 
     def token(self) -> str:
         """The liveliness token key of this entity."""

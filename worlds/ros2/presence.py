@@ -19,7 +19,7 @@ from sensorimotor.protocol.bus import Bus, BusMessage
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import Embedding
 from sensorimotor.worlds.ros2.cdr import Codec
-from sensorimotor.worlds.ros2.names import Entity, Qos
+from sensorimotor.worlds.ros2.names import DEFAULT_QOS, Entity
 from sensorimotor.worlds.ros2.rosbus import RosBus
 
 log = logging.getLogger("sme.ros2")
@@ -56,7 +56,7 @@ class EmbeddingOffer:
             topic,
             EMBEDDING_TYPE,
             codec.type_hash(EMBEDDING_TYPE),
-            Qos(),
+            DEFAULT_QOS,
         )
         self.pub = robot_bus.ros_publisher(ent)
         agent_bus.subscribe(keys.agent_embedding("*", world_id), self._on_embedding)

@@ -27,7 +27,7 @@ from sensorimotor.protocol.messages import ActionSpace, SensorSpec, Truth, World
 from sensorimotor.protocol.params import ParamError, option, parse
 from sensorimotor.worlds.base import StepResult, World
 from sensorimotor.worlds.ros2.cdr import Codec, FieldPathError, image_array, read_path
-from sensorimotor.worlds.ros2.names import SENSOR_QOS, Entity, Qos
+from sensorimotor.worlds.ros2.names import DEFAULT_QOS, SENSOR_QOS, Entity
 from sensorimotor.worlds.ros2.presence import EmbeddingOffer
 from sensorimotor.worlds.ros2.robot_file import (
     IMAGE,
@@ -177,10 +177,7 @@ class Ros2World(World):
         self.codec = Codec(rf.distro)
         self.max_episode_steps = rf.max_episode_steps
         endpoint = prm.connect or rf.connect
-        try:
-            self.bus = RosBus(BusConfig(mode="client", connect=(endpoint,)))
-        except BusError as e:
-            raise ParamError(f"ros2: cannot reach the robot's router at {endpoint}: {e}") from None
+        self.bus = self._connect(endpoint, rf.discovery_timeout)
         self.latest = Latest()
         self.stale = 0  # observations taken without fresh samples of every topic (the robot fell behind)
         self.commands = 0
@@ -191,6 +188,21 @@ class Ros2World(World):
             raise
 
     # start-up ------------------------------------------------------------------------------------
+    @staticmethod
+    def _connect(endpoint: str, timeout: float) -> RosBus:
+        """A client session with the robot's router, tried again for `timeout` seconds."""
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                return RosBus(BusConfig(mode="client", connect=(endpoint,)))
+            except BusError:
+                if time.monotonic() >= end:
+                    raise ParamError(
+                        f"ros2: nothing answered at {endpoint} within {timeout:g} s: is the robot's router "
+                        "(`ros2 run rmw_zenoh_cpp rmw_zenohd`) running there? Set `connect` in [robot] or --param connect=..."
+                    ) from None
+                time.sleep(0.2)
+
     def _discover(self) -> dict[str, Topic]:
         rf = self.rf
         end = time.monotonic() + rf.discovery_timeout
@@ -241,7 +253,7 @@ class Ros2World(World):
             cmd.name,
             cmd.ros_type,
             cmd.type_hash,
-            Qos(),
+            DEFAULT_QOS,
         )
         self.command: RosPublisher = bus.ros_publisher(ent, block=True)
         self.node = node

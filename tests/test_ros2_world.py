@@ -1,0 +1,191 @@
+"""`sme world ros2` with the stand-in ROS 2 arm (rmw_zenoh's wire, no ROS install): the robot file
+checked against what the robot's tokens offer (exit 2 naming the choices), the robot's moves the
+same as the arm world's, and one bounded end-to-end run - stand-in -> rmw_zenoh-format bus ->
+`sme world ros2` -> stock `sme agent` -> embedding, offered back on a ROS 2 topic."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sensorimotor.protocol.params import ParamError
+from sensorimotor.tools.common import free_port
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = (ROOT / "tests" / "data" / "standin_arm_ros2.toml").read_text()
+GRID = "grid = [[-0.2, 0.0, 0.2, 0.4, 0.6, 0.8, 1.0], [-0.2, 0.0, 0.2, 0.4, 0.6, 0.8, 1.0]]"
+RATE = 100.0
+
+
+def small_file(folder: Path, ep: str, *edits: tuple[str, str], name: str = "robot.toml") -> str:
+    """The stand-in's robot file for a lattice of 3 (9 starts), at RATE Hz, on `ep`, with `edits`."""
+    text = BASE.replace('connect = "tcp/127.0.0.1:7447"', f'connect = "{ep}"').replace("rate = 50.0", f"rate = {RATE}")
+    text = text.replace(GRID, "grid = [[0.2, 0.4, 0.6], [0.2, 0.4, 0.6]]").replace(
+        "max_episode_steps = 48", "max_episode_steps = 16"
+    )
+    text = text.replace("[robot]\n", "[robot]\ndiscovery_timeout = 0.5\n")
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new, 1)  # the first: the sensors come before the action
+    path = folder / name
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def standin():
+    """The stand-in arm (lattice 3) as its own rmw_zenohd router on a free port; stopped at the end."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    cmd = [sys.executable, "-m", "sensorimotor.worlds.ros2.standin", "--listen", ep, "--rate", str(RATE), "-q"]
+    p = subprocess.Popen(
+        [*cmd, "--param", "lattice=3"], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    from sensorimotor.protocol.bus import BusConfig
+    from sensorimotor.worlds.ros2.rosbus import RosBus
+    from tests.conftest import wait_for
+
+    def up() -> bool:
+        try:
+            with RosBus(BusConfig(mode="client", connect=(ep,))) as b:
+                return any(e.kind == "MS" for e in b.graph(0))
+        except Exception:
+            return False
+
+    try:
+        assert wait_for(up, 30, every=0.3), "the stand-in did not come up"
+        yield ep
+    finally:
+        p.send_signal(signal.SIGINT)
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+        if p.stderr:
+            p.stderr.close()
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (
+            ('type = "sensor_msgs/msg/JointState"\nfield', 'type = "sensor_msgs/msg/Imu"\nfield'),
+            "sensor 'joints': the robot's /arm/joint_states is sensor_msgs/msg/JointState, not sensor_msgs/msg/Imu",
+        ),
+        (
+            ('topic = "/arm/joint_states"', 'topic = "/arm/joints"'),
+            "the robot publishes no topic /arm/joints (sensor 'joints'); it publishes: /arm/camera/image_raw "
+            "(sensor_msgs/msg/Image), /arm/joint_states (sensor_msgs/msg/JointState), /arm/reward (std_msgs/msg/Float64)",
+        ),
+        (
+            ('field = "position"\njoints', 'field = "positions"\njoints'),
+            "no numeric field 'positions'; valid: header.stamp.sec",
+        ),
+        (('topic = "/arm/joint_commands"', 'topic = "/arm/cmd"'), "the robot subscribes to no topic /arm/cmd"),
+    ],
+)
+def test_what_the_robot_does_not_offer_is_refused_naming_what_it_does(standin, tmp_path, edit, words):
+    from sensorimotor.worlds.ros2.world import Ros2World
+
+    with pytest.raises(ParamError) as e:
+        Ros2World("ros2", 0, robot=small_file(tmp_path, standin, edit))
+    assert words in str(e.value)
+
+
+@pytest.mark.integration
+def test_sme_world_ros2_exits_2_naming_the_robots_topics(standin, tmp_path):
+    bad = small_file(tmp_path, standin, ('topic = "/arm/reward"', 'topic = "/arm/score"'))
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sensorimotor.tools.cli",
+            "world",
+            "ros2",
+            "--robot",
+            bad,
+            "--connect",
+            f"tcp/127.0.0.1:{free_port()}",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert p.returncode == 2
+    assert (
+        "publishes no topic /arm/score (goal reward)" in p.stderr and "/arm/reward (std_msgs/msg/Float64)" in p.stderr
+    )
+
+
+@pytest.mark.integration
+def test_the_stand_in_moves_as_the_arm_world_does(standin, tmp_path):
+    """Seeded actions through rmw_zenoh's wire give the arm world's joints, rewards and images."""
+    from sensorimotor.worlds.arm import ArmWorld
+    from sensorimotor.worlds.ros2.world import Ros2World
+
+    with Ros2World("ros2", 0, robot=small_file(tmp_path, standin)) as w, ArmWorld("arm", 0, lattice=3) as arm:
+        assert w.spec().n_starts == arm.spec().n_starts == 9
+        np.testing.assert_allclose(w.truth().tensors["positions"], arm.truth().tensors["positions"], atol=1e-9)
+        rng = np.random.default_rng(3)
+        k = 0
+        a, b = w.reset(start=k), arm.reset(start=k)
+        for _ in range(40):
+            assert a.reward == b.reward and a.done == b.done
+            np.testing.assert_allclose(a.tensors["camera"], b.tensors["camera"], atol=1 / 255)
+            if a.done:
+                k = int(rng.integers(9))
+                a, b = w.reset(start=k), arm.reset(start=k)
+                continue
+            act = np.array([rng.integers(4)])
+            a, b = w.step(act), arm.step(act)
+        assert w.stale == 0
+
+
+@pytest.mark.integration
+def test_the_stand_in_through_sme_world_ros2_is_embedded_and_offered_on_a_ros2_topic(
+    procs, endpoint, standin, tmp_path
+):
+    """stand-in -> `sme world ros2` -> stock `sme agent` -> an embedding within 0.1 of the joint
+    lattice; the world is a node of the ROS graph and republishes it as a Float64MultiArray."""
+    from sensorimotor.protocol.bus import BusConfig
+    from sensorimotor.worlds.ros2.cdr import Codec
+    from sensorimotor.worlds.ros2.names import topic_key
+    from sensorimotor.worlds.ros2.rosbus import RosBus
+    from tests.conftest import agent_status, wait_for, world_link
+
+    robot = small_file(tmp_path, standin)
+    procs.start("agent", "--listen", endpoint, "-q")
+    procs.start("world", "ros2", "--robot", robot, "--connect", endpoint, "--steps", "3000", "-q")
+    codec = Codec("jazzy")
+    t = "std_msgs/msg/Float64MultiArray"
+    with RosBus(BusConfig(mode="client", connect=(standin,))) as ros:
+        got: list = []
+        ros.ros_subscribe(topic_key(0, "/sme/embedding", t, codec.type_hash(t)), got.append)
+
+        def learned() -> bool:
+            link = world_link(agent_status(endpoint), "ros2")
+            return link is not None and link.embedding_version > 0 and link.last_procrustes_error < 0.1
+
+        assert wait_for(learned, 120, every=0.5)
+        graph = ros.graph(0)
+        ours = {(e.kind, e.topic) for e in graph if e.node == "sme_world"}
+        assert {
+            ("NN", ""),
+            ("MP", "/arm/joint_commands"),
+            ("MS", "/arm/camera/image_raw"),
+            ("MP", "/sme/embedding"),
+        } <= ours
+        assert wait_for(lambda: got, 20)
+        msg = codec.deserialize(got[-1].payload, t)
+        dims = [(d.label, d.size, d.stride) for d in msg.layout.dim]
+        assert dims == [("points", 9, 18), ("coords", 2, 2)] and msg.data.shape == (18,)
+        assert msg.layout.data_offset >= 1  # the embedding's version
