@@ -189,3 +189,43 @@ def test_the_stand_in_through_sme_world_ros2_is_embedded_and_offered_on_a_ros2_t
         dims = [(d.label, d.size, d.stride) for d in msg.layout.dim]
         assert dims == [("points", 9, 18), ("coords", 2, 2)] and msg.data.shape == (18,)
         assert msg.layout.data_offset >= 1  # the embedding's version
+
+
+@pytest.mark.integration
+def test_sme_record_keeps_ros2_topics_with_ros2msg_schemas(standin, tmp_path):
+    """`sme record --ros2`: every ROS 2 channel is CDR with its ros2msg schema (mcap's reader),
+    and rosbags reads its messages back; `sme replay`'s reader leaves them out."""
+    from mcap.reader import make_reader
+
+    from sensorimotor.protocol.bus import BusConfig
+    from sensorimotor.tools.mcap_io import read
+    from sensorimotor.tools.record import Recorder
+    from sensorimotor.worlds.ros2.cdr import Codec
+    from sensorimotor.worlds.ros2.rosbus import RosBus
+    from sensorimotor.worlds.ros2.tap import RosTap
+    from tests.conftest import wait_for
+
+    path = str(tmp_path / "ros2.mcap")
+    topics = {"/arm/joint_states", "/arm/camera/image_raw", "/arm/reward"}
+    with RosBus(BusConfig(mode="client", connect=(standin,))) as bus:
+        rec = Recorder(bus, path).start()
+        tap = RosTap(standin, rec.add_ros2)
+        try:
+            assert wait_for(lambda: topics <= {t for t, _ in tap.keys.values()} and rec.received >= 30, 20)
+        finally:
+            tap.close()
+            rec.stop()
+    codec = Codec("jazzy")
+    seen: dict[str, int] = {}
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.message_encoding != "cdr":
+                continue
+            assert schema is not None and schema.encoding == "ros2msg"
+            assert schema.data.decode() == codec.msgdef(schema.name)
+            msg = codec.deserialize(message.data, schema.name)
+            if channel.topic == "/arm/joint_states":
+                assert "lbr_iiwa_joint_2" in list(msg.name) and len(msg.position) == len(msg.name)
+            seen[channel.topic] = seen.get(channel.topic, 0) + 1
+    assert topics <= set(seen) and min(seen[t] for t in topics) >= 2
+    assert not any(r.topic.startswith("/") for r in read(path))
