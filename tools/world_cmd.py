@@ -24,7 +24,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "agent's action k (resend after --resend seconds, then keep waiting). The agent "
         "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ", and gym:ENV_ID for any "
         "Gymnasium environment (gym:module:ENV_ID imports module first, from the current folder too; the "
-        "environment's keyword arguments as --param k=v). "
+        "environment's keyword arguments as --param k=v), and `ros2 --robot FILE.toml` for a ROS 2 robot over "
+        "rmw_zenoh (docs/ros2.md). "
         "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.",
     )
     p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)) + ", or gym:ENV_ID")
