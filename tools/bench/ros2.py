@@ -39,6 +39,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--camera-seconds", type=float, default=15.0, help="throughput: seconds of 640x480 camera")
     p.add_argument("--seed", type=int, default=0, help="learn: the seed of both runs")
     p.add_argument("--timeout", type=float, default=600.0, help="learn: seconds per phase")
+    p.add_argument(
+        "--learn-rate", type=float, default=200.0, help="learn: the stand-in's rate, Hz (default 200: a shorter run)"
+    )
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
     p.set_defaults(func=main_args)
 
@@ -178,7 +181,7 @@ def _until(pred: Any, timeout: float) -> Any:
     return None
 
 
-def learn_one(kind: str, seed: int, timeout: float) -> dict[str, Any]:
+def learn_one(kind: str, seed: int, timeout: float, rate: float = 200.0) -> dict[str, Any]:
     """One seeded run through `sme world arm` (kind ``native``) or the stand-in + `sme world ros2`."""
     procs: list[subprocess.Popen] = []
     out: dict[str, Any] = {"world": kind, "seed": seed}
@@ -197,13 +200,13 @@ def learn_one(kind: str, seed: int, timeout: float) -> dict[str, Any]:
             else:
                 wid = "ros2"
                 rob = f"tcp/127.0.0.1:{free_port()}"
-                procs.append(_standin(rob, os.path.join(tmp, "s.json")))
-                time.sleep(2.0)
+                procs.append(_standin(rob, os.path.join(tmp, "s.json"), "--rate", str(rate)))
+                out["standin_rate_hz"] = rate
                 args = [
                     "world",
                     "ros2",
                     "--robot",
-                    robot_file(tmp, 50.0, rob),
+                    robot_file(tmp, rate, rob),
                     "--seed",
                     str(seed),
                     "--connect",
@@ -223,17 +226,17 @@ def learn_one(kind: str, seed: int, timeout: float) -> dict[str, Any]:
             out["error"] = first["procrustes_error"] if first else None
             if first is None:
                 return out
+            n0 = len(rows)
             pert = _py("-m", "sensorimotor.tools.cli", "perturb", *change, "--world", wid, "--connect", ep)
             out["perturb_exit"] = pert.wait(30)
             out["change"] = " ".join(change)
-            n0 = len(rows)
             relearned = _until(lambda: next((r for r in rows[n0:] if r.get("trigger") == "relearned"), None), timeout)
             drop = next((r for r in rows[n0:] if r.get("kind") == "drop_detected"), None)
-            applied = next((r for r in rows[n0:] if r.get("kind") in ("control_applied", "perturbation_applied")), None)
-            out["drop_step"] = drop["step"] if drop else None
+            learned_at = max((r.get("step") or 0) for r in rows[:n0])
+            out["last_step_before_change"] = learned_at
+            out["drop_step"] = drop["step"] if drop else (relearned or {}).get("drop_step")
             out["relearned_step"] = relearned["step"] if relearned else None
             out["relearned_error"] = relearned["procrustes_error"] if relearned else None
-            out["applied_step"] = applied.get("step") if applied else None
         finally:
             for p in reversed(procs):
                 _stop(p)
@@ -244,7 +247,7 @@ def main_args(args: argparse.Namespace) -> int:
     if args.what == "throughput":
         res: Any = throughput(args.ticks, args.rate, args.camera_seconds)
     else:
-        res = [learn_one(k, args.seed, args.timeout) for k in ("native", "ros2")]
+        res = [learn_one(k, args.seed, args.timeout, args.learn_rate) for k in ("native", "ros2")]
     text = json.dumps(res, indent=2)
     print(text)
     if args.json:
