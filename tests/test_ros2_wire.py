@@ -294,3 +294,29 @@ def test_a_sample_without_attachment_is_refused_as_rmw_zenoh_does(endpoint):
             assert JAZZY.deserialize(got[0].payload, "std_msgs/msg/String").data == "hi"
             graph = us.graph(0)
             assert ent in graph  # the publisher's token, parsed back from the router
+
+
+def test_a_humble_robots_topics_resolve_to_keys_ending_in_type_hash_not_supported():
+    """Types and hashes come from the robot's tokens: a Humble robot's keys carry its placeholder."""
+    from pathlib import Path
+
+    from sensorimotor.worlds.ros2.robot_file import load
+    from sensorimotor.worlds.ros2.world import resolve
+
+    rf = load(str(Path(__file__).parent / "data" / "standin_arm_ros2.toml"))
+    offered = [
+        ("MP", "/arm/joint_states", "sensor_msgs/msg/JointState"),
+        ("MP", "/arm/camera/image_raw", "sensor_msgs/msg/Image"),
+        ("MP", "/arm/reward", "std_msgs/msg/Float64"),
+        ("MS", "/arm/joint_commands", "sensor_msgs/msg/JointState"),
+    ]
+    ents = [
+        Entity(0, "z", 0, i + 1, k, "arm", "/", "/", t, rt, HUMBLE.type_hash(rt))
+        for i, (k, t, rt) in enumerate(offered)
+    ]
+    topics = resolve(rf, ents, HUMBLE)
+    assert (
+        topics["/arm/joint_commands"].key
+        == "0/arm/joint_commands/sensor_msgs::msg::dds_::JointState_/TypeHashNotSupported"
+    )
+    assert all(t.type_hash == "TypeHashNotSupported" for t in topics.values())
