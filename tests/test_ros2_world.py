@@ -229,3 +229,38 @@ def test_sme_record_keeps_ros2_topics_with_ros2msg_schemas(standin, tmp_path):
             seen[channel.topic] = seen.get(channel.topic, 0) + 1
     assert topics <= set(seen) and min(seen[t] for t in topics) >= 2
     assert not any(r.topic.startswith("/") for r in read(path))
+
+
+@pytest.mark.integration
+def test_a_body_change_on_the_robot_itself_is_seen_only_in_what_it_does(standin, tmp_path):
+    """A lesion made on the stand-in (its body_change topic, as a ROS 2 node would send it): the
+    world is not told; the joint no longer moves, and a start pose it cannot reach starts where the
+    robot stopped. `heal` gives the joint back (the module's stand-in is shared)."""
+    import time
+
+    from sensorimotor.worlds.ros2.cdr import Codec
+    from sensorimotor.worlds.ros2.names import Entity
+    from sensorimotor.worlds.ros2.world import Ros2World
+    from tests.conftest import wait_for
+
+    c, t = Codec(), "std_msgs/msg/String"
+    with Ros2World("ros2", 0, robot=small_file(tmp_path, standin)) as w:
+        pub = w.bus.ros_publisher(
+            Entity(0, w.bus.zid, 0, 99, "MP", "tester", "/", "/", "/arm/body_change", t, c.type_hash(t))
+        )
+        w.reset(start=4)  # (0.4, 0.4)
+
+        time.sleep(0.5)  # the stand-in's subscription reaches the new publisher (a second lesion would free the joint)
+        pub.put(c.serialize(c.new(t, data="lesion joint=lbr_iiwa_joint_2 at=0.6"), t))
+        try:
+            assert wait_for(lambda: abs(w._fresh(0)["readings"]["joints"][0] - 0.6) < 1e-9, 10, every=0.05)
+            w.step(np.array([0]))  # joint 2 + : locked, stays
+            w.step(np.array([2]))  # joint 4 + : moves
+            np.testing.assert_allclose(w._obs["readings"]["joints"], [0.6, 0.6], atol=1e-9)
+            w.reset(start=0)  # (0.2, 0.2): joint 2 cannot get there
+            np.testing.assert_allclose(w._obs["readings"]["joints"], [0.6, 0.2], atol=1e-9)
+            assert w.starts_short == 1
+        finally:
+            pub.put(c.serialize(c.new(t, data="heal"), t))
+        w.reset(start=0)
+        np.testing.assert_allclose(w._obs["readings"]["joints"], [0.2, 0.2], atol=1e-9)

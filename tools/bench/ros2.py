@@ -40,6 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="learn: the seed of both runs")
     p.add_argument("--timeout", type=float, default=600.0, help="learn: seconds per phase")
     p.add_argument(
+        "--change", choices=sorted(CHANGES), default="reverse", help="learn: the body change made once learned"
+    )
+    p.add_argument(
         "--learn-rate", type=float, default=200.0, help="learn: the stand-in's rate, Hz (default 200: a shorter run)"
     )
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
@@ -181,7 +184,37 @@ def _until(pred: Any, timeout: float) -> Any:
     return None
 
 
-def learn_one(kind: str, seed: int, timeout: float, rate: float = 200.0) -> dict[str, Any]:
+#: the body change made once learned: native (`sme perturb` on the arm world), through `sme world ros2`
+#: (the generic kinds of our node), and on the stand-in robot itself (its ``body_change`` topic)
+CHANGES: dict[str, tuple[list[str], list[str] | None, str | None]] = {
+    "reverse": (["reverse", "--param", "joint=lbr_iiwa_joint_4"], ["reverse", "--param", "pairs=2:3"], None),
+    "lesion": (
+        ["lesion", "--param", "joint=lbr_iiwa_joint_2", "--param", "at=-0.2"],
+        None,
+        "lesion joint=lbr_iiwa_joint_2 at=-0.2",
+    ),
+}
+
+
+def _tell_robot(endpoint: str, text: str) -> None:
+    """Publish `text` on the stand-in's ``/arm/body_change`` as a ROS 2 node would."""
+    from sensorimotor.protocol.bus import BusConfig
+    from sensorimotor.worlds.ros2.cdr import Codec
+    from sensorimotor.worlds.ros2.names import Entity
+    from sensorimotor.worlds.ros2.rosbus import RosBus
+
+    c = Codec()
+    t = "std_msgs/msg/String"
+    with RosBus(BusConfig(mode="client", connect=(endpoint,))) as bus:
+        pub = bus.ros_publisher(
+            Entity(0, bus.zid, 0, 1, "MP", "bench", "/", "/", "/arm/body_change", t, c.type_hash(t))
+        )
+        time.sleep(0.5)  # the stand-in's subscription reaches this session
+        pub.put(c.serialize(c.new(t, data=text), t))
+        time.sleep(0.5)
+
+
+def learn_one(kind: str, seed: int, timeout: float, rate: float = 200.0, change: str = "reverse") -> dict[str, Any]:
     """One seeded run through `sme world arm` (kind ``native``) or the stand-in + `sme world ros2`."""
     procs: list[subprocess.Popen] = []
     out: dict[str, Any] = {"world": kind, "seed": seed}
@@ -196,7 +229,8 @@ def learn_one(kind: str, seed: int, timeout: float, rate: float = 200.0) -> dict
                 procs.append(
                     _py("-m", "sensorimotor.tools.cli", "world", "arm", "--seed", str(seed), "--connect", ep, "-q")
                 )
-                change = ["reverse", "--param", "joint=lbr_iiwa_joint_4"]
+                perturb: list[str] | None = CHANGES[change][0]
+                robot_change: str | None = None
             else:
                 wid = "ros2"
                 rob = f"tcp/127.0.0.1:{free_port()}"
@@ -214,7 +248,7 @@ def learn_one(kind: str, seed: int, timeout: float, rate: float = 200.0) -> dict
                     "-q",
                 ]
                 procs.append(_py("-m", "sensorimotor.tools.cli", *args))
-                change = ["reverse", "--param", "pairs=2:3"]  # the generic reverse: joint 4's +/- swapped
+                perturb, robot_change = CHANGES[change][1], CHANGES[change][2]
             t0 = time.monotonic()
 
             def good() -> dict | None:
@@ -227,9 +261,13 @@ def learn_one(kind: str, seed: int, timeout: float, rate: float = 200.0) -> dict
             if first is None:
                 return out
             n0 = len(rows)
-            pert = _py("-m", "sensorimotor.tools.cli", "perturb", *change, "--world", wid, "--connect", ep)
-            out["perturb_exit"] = pert.wait(30)
-            out["change"] = " ".join(change)
+            if perturb is not None:
+                pert = _py("-m", "sensorimotor.tools.cli", "perturb", *perturb, "--world", wid, "--connect", ep)
+                out["perturb_exit"] = pert.wait(30)
+                out["change"] = "sme perturb " + " ".join(perturb)
+            else:
+                _tell_robot(rob, str(robot_change))
+                out["change"] = f"on the robot: {robot_change}"
             relearned = _until(lambda: next((r for r in rows[n0:] if r.get("trigger") == "relearned"), None), timeout)
             drop = next((r for r in rows[n0:] if r.get("kind") == "drop_detected"), None)
             learned_at = max((r.get("step") or 0) for r in rows[:n0])
@@ -247,7 +285,7 @@ def main_args(args: argparse.Namespace) -> int:
     if args.what == "throughput":
         res: Any = throughput(args.ticks, args.rate, args.camera_seconds)
     else:
-        res = [learn_one(k, args.seed, args.timeout, args.learn_rate) for k in ("native", "ros2")]
+        res = [learn_one(k, args.seed, args.timeout, args.learn_rate, args.change) for k in ("native", "ros2")]
     text = json.dumps(res, indent=2)
     print(text)
     if args.json:

@@ -56,6 +56,9 @@ class RosBus(Bus):
         self.refused = 0
         self._next_id = 0
 
+    def __enter__(self) -> RosBus:
+        return self
+
     @property
     def zid(self) -> str:
         """This session's Zenoh id, as rmw_zenoh writes it in tokens."""

@@ -8,7 +8,8 @@ as the arm world renders it, or ``rgb8``/``32FC1``; `camera` scales it up to e.g
 throughput figures) and the arm world's goal as a ``std_msgs/Float64`` reward (1 on the goal pose),
 and subscribes to ``sensor_msgs/JointState`` position commands: each is applied on receipt, as the
 arm world applies a move (a target outside the start lattice's range is not made; a locked joint
-stays). Run it with ``python -m sensorimotor.worlds.ros2.standin --listen tcp/127.0.0.1:7447``: it
+stays). A ``std_msgs/String`` on ``body_change`` (``lesion joint=lbr_iiwa_joint_2 at=-0.2``) changes
+the robot's body the way `sme perturb` changes the arm world's, unannounced to the world process. Run it with ``python -m sensorimotor.worlds.ros2.standin --listen tcp/127.0.0.1:7447``: it
 then is the robot's `rmw_zenohd` router as well.
 """
 
@@ -26,8 +27,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from sensorimotor.protocol.bus import BusConfig, BusError
-from sensorimotor.protocol.params import ParamError
+from sensorimotor.protocol.messages import Control
+from sensorimotor.protocol.params import ParamError, assignments
 from sensorimotor.worlds.arm import ArmWorld
+from sensorimotor.worlds.base import PerturbationError
 from sensorimotor.worlds.quiet import pybullet_quiet
 from sensorimotor.worlds.ros2.cdr import Codec, check_distro
 from sensorimotor.worlds.ros2.names import DEFAULT_QOS, SENSOR_QOS, Entity, Qos
@@ -99,6 +102,7 @@ class StandinArm:
             "camera": f"{ns}/camera/image_raw",
             "reward": f"{ns}/reward",
             "command": f"{ns}/joint_commands",
+            "body_change": f"{ns}/body_change",
         }
         js, img, f64 = "sensor_msgs/msg/JointState", "sensor_msgs/msg/Image", "std_msgs/msg/Float64"
         self.pub_joints = bus.ros_publisher(ent("MP", self.topics["joints"], js))
@@ -107,6 +111,10 @@ class StandinArm:
         sub = ent("MS", self.topics["command"], js)
         bus.declare(sub)
         bus.ros_subscribe(sub.key(), self._on_command)
+        change = ent("MS", self.topics["body_change"], "std_msgs/msg/String")
+        bus.declare(change)
+        bus.ros_subscribe(change.key(), self._on_body_change)
+        self.changes: list[str] = []
         self.all_joints = [n for n in arm.movable_names]
         self.moving_names = [arm.joint_names[i] for i in arm.moving]
         self.lo, self.hi = arm.poses.min(axis=0) - 1e-9, arm.poses.max(axis=0) + 1e-9
@@ -136,6 +144,22 @@ class StandinArm:
                 self.stats.applied += 1
             else:
                 self.stats.refused += 1
+
+    def _on_body_change(self, sample: RosSample) -> None:
+        """``KIND k=v ...`` on ``{ns}/body_change`` (std_msgs/String): the arm world's own body
+        change (morph, lesion, reverse, gain, heal) made to the robot itself, not told to anyone."""
+        text = str(self.codec.deserialize(sample.payload, "std_msgs/msg/String").data)
+        kind, *rest = text.split() or [""]
+        try:
+            params = assignments(rest)
+            with self._lock:
+                said = self.arm.perturb(Control(self.arm.world_id, kind, params))
+        except (ParamError, PerturbationError, ValueError) as e:
+            log.warning("body change %r refused: %s", text, e)
+            self.changes.append(f"refused: {e}")
+            return
+        log.info("body change: %s", said)
+        self.changes.append(said)
 
     # publishing ----------------------------------------------------------------------------------
     def _image(self, angles: np.ndarray) -> np.ndarray:
@@ -230,8 +254,6 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError:
             print(f"standin: --camera {args.camera!r} is not WxH", file=sys.stderr)
             return 2
-    from sensorimotor.protocol.params import assignments
-
     try:
         check_distro(args.distro)
         with pybullet_quiet():

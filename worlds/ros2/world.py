@@ -41,6 +41,7 @@ from sensorimotor.worlds.ros2.robot_file import (
 from sensorimotor.worlds.ros2.rosbus import RosBus, RosPublisher, RosSample
 
 log = logging.getLogger("sme.ros2")
+STILL_READINGS = 2  # fresh readings without a move after which a start pose counts as out of reach
 
 
 @dataclass(frozen=True)
@@ -179,6 +180,7 @@ class Ros2World(World):
         endpoint = prm.connect or rf.connect
         self.bus = self._connect(endpoint, rf.discovery_timeout)
         self.latest = Latest()
+        self.starts_short = 0  # resets that ended where the robot stopped short of the start pose
         self.stale = 0  # observations taken without fresh samples of every topic (the robot fell behind)
         self.commands = 0
         try:
@@ -410,15 +412,20 @@ class Ros2World(World):
         pose = np.array(st.poses[k])
         deadline = time.monotonic() + st.timeout
         sent = self._send(pose)
+        last, still = None, 0
         while True:
             obs = self._fresh(sent)
-            if np.all(np.abs(obs["readings"][st.sensor].astype(np.float64) - pose) <= st.tolerance):
+            now = obs["readings"][st.sensor].astype(np.float64)
+            if np.all(np.abs(now - pose) <= st.tolerance):
                 return self._result(obs, first=True)
-            if time.monotonic() > deadline:
-                log.warning(
-                    "start pose %s not reached in %.1f s; going on from where the robot is", st.names[k], st.timeout
-                )
+            # a robot that stopped short (a locked joint, a limit, an obstacle) starts from where it stopped
+            still = still + 1 if last is not None and np.all(np.abs(now - last) <= st.tolerance / 2) else 0
+            if still >= STILL_READINGS or time.monotonic() > deadline:
+                self.starts_short += 1
+                if self.starts_short == 1:
+                    log.info("start pose %s not reached; starting from where the robot stopped (%s)", st.names[k], now)
                 return self._result(obs, first=True)
+            last = now
             sent = self._send(pose)
 
     def step(self, action: np.ndarray) -> StepResult:
