@@ -20,7 +20,7 @@ from sensorimotor.tools.common import free_port
 ROOT = Path(__file__).resolve().parents[1]
 BASE = (ROOT / "tests" / "data" / "standin_arm_ros2.toml").read_text()
 GRID = "grid = [[-0.2, 0.0, 0.2, 0.4, 0.6, 0.8, 1.0], [-0.2, 0.0, 0.2, 0.4, 0.6, 0.8, 1.0]]"
-RATE = 200.0
+RATE = 100.0
 
 
 def small_file(folder: Path, ep: str, *edits: tuple[str, str], name: str = "robot.toml") -> str:

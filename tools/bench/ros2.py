@@ -42,9 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--change", choices=sorted(CHANGES), default="reverse", help="learn: the body change made once learned"
     )
-    p.add_argument(
-        "--learn-rate", type=float, default=200.0, help="learn: the stand-in's rate, Hz (default 200: a shorter run)"
-    )
+    p.add_argument("--learn-rate", type=float, default=50.0, help="learn: the stand-in's rate, Hz (default 50)")
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
     p.set_defaults(func=main_args)
 
@@ -214,7 +212,7 @@ def _tell_robot(endpoint: str, text: str) -> None:
         time.sleep(0.5)
 
 
-def learn_one(kind: str, seed: int, timeout: float, rate: float = 200.0, change: str = "reverse") -> dict[str, Any]:
+def learn_one(kind: str, seed: int, timeout: float, rate: float = 50.0, change: str = "reverse") -> dict[str, Any]:
     """One seeded run through `sme world arm` (kind ``native``) or the stand-in + `sme world ros2`."""
     procs: list[subprocess.Popen] = []
     out: dict[str, Any] = {"world": kind, "seed": seed}
