@@ -112,6 +112,9 @@ def throughput(ticks: int, rate: float, camera_seconds: float) -> dict[str, Any]
             "commands_sent": sent,
             "commands_heard": s["commands"],
             "sequence_gaps": s["dropped"],
+            "commands_later_than_one_period": s["late_commands"],
+            "command_latency_ms_p50": s["command_latency_ms_p50"],
+            "command_latency_ms_p99": s["command_latency_ms_p99"],
             "never_heard_per_1000_ticks": round(1000 * missed / max(1, s["ticks"]), 3),
             "refused_out_of_range": s["refused"],
             "observations_without_fresh_samples": stale,
@@ -276,6 +279,12 @@ def learn_one(kind: str, seed: int, timeout: float, rate: float = 50.0, change: 
         finally:
             for p in reversed(procs):
                 _stop(p)
+        stats = Path(tmp, "s.json")
+        if stats.exists():  # the stand-in's own counts
+            s = json.loads(stats.read_text())
+            out["standin"] = {
+                k: s[k] for k in ("ticks", "commands", "dropped", "late_commands", "command_latency_ms_p99")
+            }
     return out
 
 

@@ -49,6 +49,9 @@ class StandinStats:
     applied: int = 0
     refused: int = 0  # out of the lattice's range, or naming no moving joint
     dropped: int = 0  # gaps in the commands' sequence numbers: sent, never heard
+    late_commands: int = 0  # heard more than one control period after they were sent (source timestamp)
+    command_latency_ms_p50: float = 0.0
+    command_latency_ms_p99: float = 0.0
     seconds: float = 0.0
     cpu_seconds: float = 0.0
 
@@ -76,6 +79,7 @@ class StandinArm:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._last_seq: dict[bytes, int] = {}
+        self._latencies: list[float] = []
         c = self.codec
         ns = namespace.rstrip("/") or ""
         self.node = Entity(domain, bus.zid, 0, 0, "NN", node, namespace or "/")
@@ -123,6 +127,11 @@ class StandinArm:
     # commands ------------------------------------------------------------------------------------
     def _on_command(self, sample: RosSample) -> None:
         att = sample.attachment
+        latency = (sample.received_ns - att.timestamp_ns) / 1e6  # same host: one clock
+        if latency > 1000.0 / self.rate:
+            self.stats.late_commands += 1
+        if len(self._latencies) < 100_000:
+            self._latencies.append(latency)
         last = self._last_seq.get(att.gid)
         if last is not None and att.sequence > last + 1:
             self.stats.dropped += att.sequence - last - 1
@@ -210,6 +219,12 @@ class StandinArm:
             self._stop.wait(max(0.0, due - time.monotonic()))
         self.stats.seconds = time.monotonic() - t0
         self.stats.cpu_seconds = time.process_time() - c0
+        if self._latencies:
+            p50, p99 = np.percentile(self._latencies, [50, 99])
+            self.stats.command_latency_ms_p50, self.stats.command_latency_ms_p99 = (
+                round(float(p50), 3),
+                round(float(p99), 3),
+            )
         return self.stats
 
     def stop(self) -> None:
