@@ -199,7 +199,7 @@ def test_sme_record_keeps_ros2_topics_with_ros2msg_schemas(standin, tmp_path):
 
     from sensorimotor.protocol.bus import BusConfig
     from sensorimotor.tools.mcap_io import read
-    from sensorimotor.tools.record import Recorder
+    from sensorimotor.tools.commands.record import Recorder
     from sensorimotor.worlds.ros2.cdr import Codec
     from sensorimotor.worlds.ros2.rosbus import RosBus
     from sensorimotor.worlds.ros2.tap import RosTap

@@ -5,7 +5,7 @@ Each source is a command and the file it wrote, kept under docs/ (docs/results/N
 of `sme reproduce CHAPTER ... --out DIR`, the stdout of `sme demo` or of a bench's `--json`;
 docs/reproduce/report-quick/: the folder of `sme reproduce all --quick`). A page holds a block between
 ``<!-- BEGIN results: NAME -->`` and ``<!-- END results: NAME -->``;
-`python -m sensorimotor.tools.results_doc PAGE...` rewrites every block from its source and
+`python -m sensorimotor.tools.docgen.results_doc PAGE...` rewrites every block from its source and
 `--check` exits 1 when a page has drifted (tests/test_results_doc.py runs the check). To refresh a
 result: run its command with ``--out DIR``, copy ``DIR/CHAPTER/results.json`` over the stored one,
 and run this module on the pages."""
@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 BLOCK = re.compile(r"(<!-- BEGIN results: ([\w.-]+) -->\n)(.*?)(<!-- END results: \2 -->)", re.S)
 PAGES = (
@@ -104,8 +104,8 @@ def markdown_file(src: Source, text: str) -> str:
 
 def report_summary(src: Source, text: str) -> str:
     """Per chapter of a `sme reproduce all` folder: wall time and the verdicts of its rows, judged
-    again from the chapter's results.json by the report's own rules (tools/report.py)."""
-    from sensorimotor.tools import report
+    again from the chapter's results.json by the report's own rules (tools/experiments/report.py)."""
+    from sensorimotor.tools.experiments import report
 
     meta = json.loads(text)
     folder = (DOCS / src.file).parent
@@ -320,7 +320,7 @@ def rewrite(text: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sensorimotor.tools.results_doc", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m sensorimotor.tools.docgen.results_doc", description=__doc__)
     p.add_argument("pages", nargs="*", help=f"pages to rewrite (default: {', '.join(PAGES)})")
     p.add_argument("--check", action="store_true", help="exit 1 if a page's blocks differ from their sources")
     args = p.parse_args(argv)
