@@ -198,8 +198,8 @@ def test_sme_record_keeps_ros2_topics_with_ros2msg_schemas(standin, tmp_path):
     from mcap.reader import make_reader
 
     from sensorimotor.protocol.bus import BusConfig
-    from sensorimotor.tools.mcap_io import read
     from sensorimotor.tools.commands.record import Recorder
+    from sensorimotor.tools.mcap_io import read
     from sensorimotor.worlds.ros2.cdr import Codec
     from sensorimotor.worlds.ros2.rosbus import RosBus
     from sensorimotor.worlds.ros2.tap import RosTap
