@@ -297,6 +297,13 @@ class Ros2World(World):
         got = self.latest.wait(self.read_topics, after, timeout=20 * period + 2.0)
         if got is None:
             self.stale += 1
+            if self.stale == 1 or self.stale % 100 == 0:
+                silent = [t for t in self.read_topics if (s := self.latest.get(t)) is None or s.received_ns < after]
+                log.warning(
+                    "no fresh sample on %s (%d observations so far went stale): is the robot up?",
+                    ", ".join(silent),
+                    self.stale,
+                )
             got = {t: self.latest.get(t) for t in self.read_topics}  # type: ignore[misc]
         return self._observe(got)  # type: ignore[arg-type]
 
