@@ -416,31 +416,41 @@ class Ros2World(World):
                 self.rng = np.random.default_rng(seed)
             return self._result(self._fresh(time.time_ns()), first=True)
         k = self.pick_start(seed, start, len(st.poses))
-        pose = np.array(st.poses[k])
-        deadline = time.monotonic() + st.timeout
-        sent = self._send(pose)
+        obs, reached = self._drive(np.array(st.poses[k]), st.sensor, st.tolerance, st.timeout)
+        if not reached:
+            self.starts_short += 1
+            if self.starts_short == 1:
+                log.info("start pose %s not reached; starting from where the robot stopped", st.names[k])
+        return self._result(obs, first=True)
+
+    def _drive(self, target: np.ndarray, sensor: str, tol: float, timeout: float) -> tuple[dict[str, Any], bool]:
+        """Send the position command `target` until `sensor` reads within `tol` of it (True), or
+        the robot stops short - `STILL_READINGS` fresh readings without a move: a locked joint, a
+        limit, a refused target - or `timeout` seconds pass (False). Reading until the target is
+        seen also keeps a command that reached the robot late from being read as not made."""
+        deadline = time.monotonic() + timeout
         last, still = None, 0
         while True:
-            obs = self._fresh(sent)
-            now = obs["readings"][st.sensor].astype(np.float64)
-            if np.all(np.abs(now - pose) <= st.tolerance):
-                return self._result(obs, first=True)
-            # a robot that stopped short (a locked joint, a limit, an obstacle) starts from where it stopped
-            still = still + 1 if last is not None and np.all(np.abs(now - last) <= st.tolerance / 2) else 0
+            obs = self._fresh(self._send(target))
+            now = obs["readings"][sensor]
+            if np.all(np.abs(now - target) <= tol):
+                return obs, True
+            still = still + 1 if last is not None and np.all(np.abs(now - last) <= tol / 2) else 0
             if still >= STILL_READINGS or time.monotonic() > deadline:
-                self.starts_short += 1
-                if self.starts_short == 1:
-                    log.info("start pose %s not reached; starting from where the robot stopped (%s)", st.names[k], now)
-                return self._result(obs, first=True)
+                return obs, False
             last = now
-            sent = self._send(pose)
 
     def step(self, action: np.ndarray) -> StepResult:
-        """Send one command and read the robot `settle` control periods later."""
+        """Send one command and read the robot `settle` control periods later; a position command
+        relative to a sensor is sent until the robot is there or stops short (see `_drive`)."""
         values = self.command_values(action)
-        sent = self._send(values)
         self.t += 1
-        return self._result(self._fresh(sent))
+        a = self.rf.action
+        if a.relative_to:
+            tol = self.rf.start.tolerance if self.rf.start else 1e-3
+            obs, _ = self._drive(values, a.relative_to, tol, 20 / self.rf.rate + 2.0)
+            return self._result(obs)
+        return self._result(self._fresh(self._send(values)))
 
     def truth(self) -> Truth | None:
         """The start poses (``positions``, the commanded joint values), row i for start state i."""
