@@ -33,7 +33,13 @@ ROBOT_FILE = Path(__file__).resolve().parents[2] / "tests" / "data" / "standin_a
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ros2", help="ROS 2 over rmw_zenoh with the stand-in arm: throughput, camera CPU, learning")
-    p.add_argument("what", choices=("throughput", "learn"), help="which figures")
+    p.add_argument(
+        "what",
+        nargs="?",
+        default="throughput",
+        choices=("throughput", "learn"),
+        help="which figures (default throughput)",
+    )
     p.add_argument("--ticks", type=int, default=2000, help="throughput: world steps (default 2000)")
     p.add_argument("--rate", type=float, default=50.0, help="throughput: the stand-in's rate, Hz (default 50)")
     p.add_argument("--camera-seconds", type=float, default=15.0, help="throughput: seconds of 640x480 camera")
