@@ -140,7 +140,6 @@ def test_stereo_pair_has_the_dissertations_one_action_and_every_run_meets_the_ba
     w.reset(start=0)
     with pytest.raises(ValueError, match="one action"):
         w.step(np.array([1]))
-    assert StereoPairWorld(diverge=True).spec().action_space.n == 2
     p = VergenceProgram(w.spec(), seed=3)
     run = run_inprocess(w, p, 20000, stop_when=lambda r: len(r.embeddings) >= 1)
     assert run.embeddings[0].metrics["policy_success"] == 1.0 and run.embeddings[0].procrustes_error <= 0.01
@@ -153,6 +152,7 @@ def test_vergence_program_does_not_publish_a_worse_policys_map():
     # seed 5 on the pair with a diverge action: the first sweep reaches the goal from 29 of 30
     # starts, the next LSPI policy from fewer; its map is not published
     w = StereoPairWorld(diverge=True, seed=5)
+    assert w.spec().action_space.n == 2
     p = VergenceProgram(w.spec(), seed=5)
 
     def sweeps(r):
@@ -192,6 +192,10 @@ def test_lesion_summary_rises_shifts_and_frozen_share():
         for k, rule in ((0, "basic"), (2, "robust"))
         for s in range(2)
     ]
-    s = lesion_summary(runs, at=100)
-    assert s["basic"]["first_after"] == [3.0, 3.0] and s["robust"]["rise"] == [2.0, 2.0]
+    s = lesion_summary(runs, at=200)
+    assert (
+        s["basic"]["last_before"] == [2.0, 2.0]
+        and s["basic"]["first_after"] == [3.0, 3.0]
+        and s["robust"]["rise"] == [2.0, 2.0]
+    )
     assert s["basic"]["frozen_weight"] == [0.3, 0.3] and s["robust"]["landing_shift_u"] == [-1.25, -1.25]

@@ -342,21 +342,25 @@ def job_retina(kind: str, *args: Any) -> dict:
 
 
 def lesion_summary(lesion: list[dict], at: int) -> dict[str, Any]:
-    """Per rule, per seed: the greedy activation at the first evaluation after the lesion, at the end
-    (mean of the last four evaluations), the rise between them, and the landing shift (px, u) over
-    the same span; plus the lesion arithmetic (the first run's world, the mean frozen share)."""
+    """Per rule, per seed: the greedy activation at the last evaluation before the lesion, just after
+    it (the evaluation at saccade `at`), at the end (mean of the last four evaluations), the rise
+    from just after to the end, and the landing shift (px, u) over the same span; plus the lesion
+    arithmetic (the first run's world, the frozen share per run)."""
     out: dict[str, Any] = {}
     for rule in ("basic", "robust"):
         rs = [r for r in lesion if r["rule"] == rule]
         if not rs:
             continue
-        i = next(k for k, s in enumerate(rs[0]["steps"]) if s > at)
+        # the evaluation at saccade `at` is made just after the lesion (before any saccade learns from it)
+        i = next(k for k, s in enumerate(rs[0]["steps"]) if s >= at)
         first = [float(r["activation"][i]) for r in rs]
+        before = [float(r["activation"][i - 1]) for r in rs]  # the last evaluation before the lesion
         end = [float(np.mean(r["activation"][-4:])) for r in rs]
         shift = [float(np.mean(r["landing_u"][-4:]) - r["landing_u"][i]) if r.get("landing_u") else 0.0 for r in rs]
         ar = [r["arithmetic"] for r in rs if r.get("arithmetic")]
         out[rule] = {
             "seeds": [r["seed"] for r in rs],
+            "last_before": before,
             "first_after": first,
             "end": end,
             "rise": [e - f for e, f in zip(end, first, strict=True)],
@@ -404,8 +408,10 @@ def plot_fig_4_4(out: str, panels: list[tuple[str, list[dict], int]]) -> None:
             a2.axhline(
                 ar["best_offset_after"][0], color="grey", ls=":", lw=0.9, label="where the lesioned retina is best"
             )
-        a1.set(title=f"{title}: greedy post-saccade activation", ylabel="activation (sum of fields)")
-        a2.set(title=f"{title}: target after one greedy saccade", ylabel="px right of the centre (lesion: right)")
+        a1.set_title(f"{title}\ngreedy post-saccade activation", fontsize=9)
+        a2.set_title(f"{title}\nwhere one greedy saccade puts the target", fontsize=9)
+        a1.set_ylabel("activation (sum of fields)")
+        a2.set_ylabel("px right of the centre (the lesion is right)")
         a1.legend(fontsize=7)
         a2.legend(fontsize=7)
     fig.tight_layout()
