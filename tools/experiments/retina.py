@@ -414,7 +414,7 @@ def plot_fig_4_4(out: str, panels: list[tuple[str, list[dict], int]]) -> None:
                 y = np.asarray([r[key] for r in rs], dtype=np.float64)
                 m = y.mean(axis=0)
                 h = np.array([ci95(list(col))[1] for col in y.T])
-                ax.plot(x, m, color=colour, lw=1.4, label=f"{rule} rule ({len(rs)} runs)")
+                ax.plot(x, m, color=colour, lw=1.4, label=f"{rule} rule ({len(rs)} run{'s' if len(rs) > 1 else ''})")
                 ax.fill_between(x, m - h, m + h, color=colour, alpha=0.2, lw=0)
         ar = next((r["arithmetic"] for r in runs if r.get("arithmetic")), None)
         for ax in (a1, a2):
@@ -432,6 +432,10 @@ def plot_fig_4_4(out: str, panels: list[tuple[str, list[dict], int]]) -> None:
         a2.set_ylabel("px right of the centre (the lesion is right)")
         a1.legend(fontsize=7)
         a2.legend(fontsize=7)
+        if not a2.lines[1:] or not any(r.get("landing_u") for r in runs):  # results from before it was recorded
+            a2.clear()
+            a2.text(0.5, 0.5, "where the target lands was\nnot recorded in these runs", ha="center", va="center")
+            a2.set_axis_off()
     fig.tight_layout()
     fig.savefig(os.path.join(out, "retina_fig4_4.png"), dpi=110)
     plt.close(fig)
