@@ -7,7 +7,7 @@ import pytest
 
 from sensorimotor.agent.programs.vergence import VergenceProgram
 from sensorimotor.protocol.messages import Control, EventKind
-from sensorimotor.tools import report
+from sensorimotor.tools.experiments import report
 from sensorimotor.tools.experiments import rovingeye as R
 from sensorimotor.tools.experiments.retina import activation_map, lesion_summary
 from sensorimotor.tools.inprocess import run_inprocess
