@@ -11,9 +11,9 @@ from sensorimotor.protocol.messages import AgentEvent, Embedding, EventKind, Tri
 from sensorimotor.tools.bench import changes as C
 from sensorimotor.tools.bench.changes_life import LifeBudget, life
 from sensorimotor.tools.bench.zoo import ZooWorld
+from sensorimotor.tools.commands.demo import change_summary, parse_perturb
+from sensorimotor.tools.commands.watch import change_mark
 from sensorimotor.tools.common import UsageError
-from sensorimotor.tools.demo import change_summary, parse_perturb
-from sensorimotor.tools.watch import change_mark
 
 pytest.importorskip("river")
 pytest.importorskip("gymnasium")
@@ -102,7 +102,7 @@ def test_watch_and_view_mark_the_change_its_noticing_and_the_relearned_map():
     assert change_mark(EventKind.WORLD_EVENT, "control_applied") == "change"
     assert change_mark(EventKind.DROP_DETECTED) == "noticed" and change_mark(EventKind.RELEARNED) == "relearned"
     assert change_mark(EventKind.POLICY_ITERATION) is None
-    from sensorimotor.tools.view import RerunLogger
+    from sensorimotor.tools.commands.view import RerunLogger
 
     class FakeRR:
         def __init__(self):

@@ -395,7 +395,7 @@ def command(world: str, change: str, seeds: int) -> str:
 
 
 def render_scorecard(src: Any, text: str) -> str:
-    """The docs' table (tools/results_doc.py): one row per (world, change) summary line of the kept
+    """The docs' table (tools/docgen/results_doc.py): one row per (world, change) summary line of the kept
     output, each with the command that gives it alone."""
     rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
     head = (

@@ -229,7 +229,7 @@ def main_args(args: argparse.Namespace) -> int:
             node = WorldNode(world, world_bus, wid, max_steps=args.steps)
             ctl = None
             if scripted is not None:
-                from sensorimotor.tools.perturb import refuse_locally
+                from sensorimotor.tools.commands.perturb import refuse_locally
 
                 ctl = Control(wid, scripted[0], scripted[1], 1, time.time())
                 why = refuse_locally(node.body.spec(), ctl)

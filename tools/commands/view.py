@@ -23,8 +23,8 @@ from sensorimotor.protocol import codec, images, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.errors import ProtocolError
 from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding, Observation, Truth, WorldEvent
-from sensorimotor.tools.replay import classify
-from sensorimotor.tools.watch import change_mark
+from sensorimotor.tools.commands.replay import classify
+from sensorimotor.tools.commands.watch import change_mark
 
 PALETTE = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75], [227, 119, 194]],
