@@ -356,7 +356,9 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _fmt(v: Any) -> str:
-    return "-" if v is None else f"{v:.3g}" if isinstance(v, float) else str(v)
+    if isinstance(v, float):
+        return f"{v:,.0f}" if abs(v) >= 1000 else f"{v:.3g}"
+    return "-" if v is None else str(v)
 
 
 def select(only: list[str] | None) -> list[ZooWorld]:
