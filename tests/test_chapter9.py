@@ -156,7 +156,7 @@ def test_mountaincar_thrust_noise_defaults_to_the_deterministic_dynamics():
 
 def test_view_draws_a_policy_map_coloured_by_cluster():
     from sensorimotor.protocol import keys
-    from sensorimotor.tools.view import PALETTE, RerunLogger
+    from sensorimotor.tools.commands.view import PALETTE, RerunLogger
 
     class FakeRR:
         def __init__(self):

@@ -145,8 +145,8 @@ def test_a_takeover_from_an_older_copy_says_so_and_numbers_after_the_last_publis
 def test_the_share_interval_is_a_command_line_option_the_workers_get_too(monkeypatch, capsys):
     """`sme agent --share-on-embedding S` sets the interval of the share after a new embedding
     version (default 2 s), for the agent and every worker; a bad value is a usage error."""
-    from sensorimotor.tools import agent_cmd
     from sensorimotor.tools.cli import build_parser, main
+    from sensorimotor.tools.commands import agent as agent_cmd
     from sensorimotor.tools.common import free_port
 
     assert build_parser().parse_args(["agent"]).share_on_embedding == 2.0

@@ -323,7 +323,7 @@ def test_every_help_page_has_the_same_layout(path, monkeypatch):
 
 
 def test_status_prints_a_table_not_a_dict():
-    from sensorimotor.tools.status import agent_lines
+    from sensorimotor.tools.commands.status import agent_lines
 
     d = {
         "agent": "a0",

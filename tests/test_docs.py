@@ -1,6 +1,6 @@
 """The documentation keeps its promises: every shell block either runs in a test (and says which)
 or says why it is not run; the blocks marked `run` are run here; the result tables and samples
-equal the files of the commands they cite (tools/results_doc.py)."""
+equal the files of the commands they cite (tools/docgen/results_doc.py)."""
 
 from __future__ import annotations
 
@@ -92,9 +92,9 @@ def test_blocks_marked_run_run(block):
 
 
 def test_result_tables_and_samples_equal_their_sources():
-    from sensorimotor.tools.results_doc import SOURCES, main
+    from sensorimotor.tools.docgen.results_doc import SOURCES, main
 
-    assert main(["--check"]) == 0, "run `python -m sensorimotor.tools.results_doc` after refreshing a result"
+    assert main(["--check"]) == 0, "run `python -m sensorimotor.tools.docgen.results_doc` after refreshing a result"
     pages = "".join(p.read_text() for p in PAGES)
     for name in SOURCES:  # every source is shown somewhere
         assert f"<!-- BEGIN results: {name} -->" in pages, name
@@ -110,7 +110,7 @@ def test_the_readme_is_short_and_keeps_the_two_commands():
 
 
 def test_a_changed_number_in_a_generated_block_is_drift(tmp_path):
-    from sensorimotor.tools.results_doc import main, render
+    from sensorimotor.tools.docgen.results_doc import main, render
 
     page = tmp_path / "page.md"
     block = render("objectpose")

@@ -8,8 +8,8 @@ import sys
 
 from sensorimotor.protocol import codec
 from sensorimotor.protocol.messages import MAX_ECHO, AgentEvent, WorldEvent, clip
-from sensorimotor.tools.agent_cmd import _worker_argv
 from sensorimotor.tools.cli import build_parser
+from sensorimotor.tools.commands.agent import _worker_argv
 
 
 def test_clip_keeps_short_text_and_cuts_long_text() -> None:

@@ -21,8 +21,8 @@ from conftest import Lines, wait_for
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
 from sensorimotor.protocol.messages import AgentStatus
+from sensorimotor.tools.commands.record import observation_step
 from sensorimotor.tools.mcap_io import read
-from sensorimotor.tools.record import observation_step
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGSTOP"), reason="needs SIGSTOP")
 

@@ -163,7 +163,7 @@ with Bus(BusConfig(mode="router", connect=(), listen=("tcp/127.0.0.1:{PORT}", "{
     poller = f"""
 import json, time
 from sensorimotor.protocol.bus import Bus, BusConfig
-from sensorimotor.tools.status import fetch_bus
+from sensorimotor.tools.commands.status import fetch_bus
 with Bus(BusConfig(mode="client", connect=("{eb}",), config_file="{lease}", retry=True)) as bus:
     while True:
         try:

@@ -293,7 +293,7 @@ def test_daemon_refuses_bad_program_params_at_construction():
 
 
 def test_agent_command_validates_before_the_bus_opens(monkeypatch, capsys):
-    from sensorimotor.tools import agent_cmd
+    from sensorimotor.tools.commands import agent as agent_cmd
 
     def no_bus(*a, **k):
         raise AssertionError("the bus must not be opened for bad parameters")
@@ -308,11 +308,11 @@ def test_agent_command_validates_before_the_bus_opens(monkeypatch, capsys):
 
 
 def test_documented_parameter_tables_equal_the_declarations():
-    from sensorimotor.tools.params_doc import current_section, render_section
+    from sensorimotor.tools.docgen.params_doc import current_section, render_section
 
     page = (ROOT / "docs" / "worlds.md").read_text()
     assert current_section(page) == render_section(), (
-        "docs/worlds.md drifted: run `python -m sensorimotor.tools.params_doc docs/worlds.md`"
+        "docs/worlds.md drifted: run `python -m sensorimotor.tools.docgen.params_doc docs/worlds.md`"
     )
     for name in WORLDS:
         assert f"`{name}`:" in page

@@ -74,7 +74,7 @@ def test_partition_between_agents_that_both_reach_the_worlds(hosts, tmp_path):
     poller = f"""
 import json, time
 from sensorimotor.protocol.bus import Bus, BusConfig
-from sensorimotor.tools.status import fetch_bus
+from sensorimotor.tools.commands.status import fetch_bus
 with Bus(BusConfig(mode="peer", connect=("{ea_c}", "{eb_c}"), config_file="{lease}")) as bus:
     while True:
         try:

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from sensorimotor.protocol.messages import Trigger
+from sensorimotor.tools.commands.replay import replay_offline
 from sensorimotor.tools.common import free_port
 from sensorimotor.tools.mcap_io import read
-from sensorimotor.tools.replay import replay_offline
 from tests.conftest import ROOT, Lines, agent_status, wait_for, world_link
 
 pytestmark = pytest.mark.integration

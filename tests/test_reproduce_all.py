@@ -10,9 +10,9 @@ import subprocess
 
 import pytest
 
-from sensorimotor.tools import report, reproduce
 from sensorimotor.tools.cli import main
-from sensorimotor.tools.experiments import shared
+from sensorimotor.tools.commands import reproduce
+from sensorimotor.tools.experiments import report, shared
 
 VERDICTS = {report.MET, report.NOT_MET, report.NOT_COMPARABLE}
 

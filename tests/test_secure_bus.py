@@ -16,7 +16,7 @@ import pytest
 from sensorimotor.protocol import codec, keys, security
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError, BusMessage, Inbox
 from sensorimotor.protocol.messages import Action, Control, Observation, WorldEvent
-from sensorimotor.tools.secure import init
+from sensorimotor.tools.commands.secure import init
 from tests.conftest import ROOT, wait_for
 from tests.conftest import agent_status as status
 from tests.test_integration_bus import read_json_lines

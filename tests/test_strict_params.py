@@ -136,7 +136,7 @@ def test_perturbations_refuse_lenient_values_with_a_bounded_message():
         with pytest.raises(PerturbationError, match=re.escape(why)) as e:
             check_perturbation("retina", kinds, Control("r1", kind, params, 1))
         assert len(str(e.value)) < BOUND + 300
-    from sensorimotor.tools.perturb import refuse_locally  # what `sme perturb` prints before sending
+    from sensorimotor.tools.commands.perturb import refuse_locally  # what `sme perturb` prints before sending
     from sensorimotor.worlds.registry import make_world
 
     spec = make_world("retina", "r1", seed=0).spec()
@@ -284,7 +284,7 @@ def test_controls_at_and_beyond_the_limits_are_applied_or_refused_never_more(wid
 
 
 def test_a_repeated_program_param_is_refused():
-    from sensorimotor.tools.agent_cmd import parse_program_params
+    from sensorimotor.tools.commands.agent import parse_program_params
 
     assert parse_program_params(["gridworld.gamma=0.9"])["gridworld"]["gamma"] == 0.9
     with pytest.raises(ParamError, match="'gridworld.gamma' is given twice"):
@@ -306,7 +306,7 @@ def test_generic_perturbations_read_their_index_lists_strictly():
 
 
 def test_a_100_kb_perturbation_kind_is_not_echoed():
-    from sensorimotor.tools.perturb import refuse_locally
+    from sensorimotor.tools.commands.perturb import refuse_locally
     from sensorimotor.worlds.registry import make_world
 
     spec = make_world("retina", "r1", seed=0).spec()

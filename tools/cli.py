@@ -11,8 +11,9 @@ import os
 import sys
 from collections.abc import Iterator
 
-from sensorimotor.tools import (
-    agent_cmd,
+from sensorimotor.tools.bench import cli as bench_cli
+from sensorimotor.tools.commands import agent as agent_cmd
+from sensorimotor.tools.commands import (
     demo,
     perturb,
     record,
@@ -22,9 +23,8 @@ from sensorimotor.tools import (
     status,
     view,
     watch,
-    world_cmd,
 )
-from sensorimotor.tools.bench import cli as bench_cli
+from sensorimotor.tools.commands import world as world_cmd
 from sensorimotor.tools.common import (
     EXIT_CODES_EPILOG,
     EXIT_FAILURE,

@@ -17,9 +17,9 @@ import time
 from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import Bus, BusConfig
+from sensorimotor.tools.commands.record import Recorder
 from sensorimotor.tools.common import free_port
 from sensorimotor.tools.mcap_io import read
-from sensorimotor.tools.record import Recorder
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

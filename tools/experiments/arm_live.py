@@ -22,8 +22,8 @@ import time
 from typing import Any
 
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+from sensorimotor.tools.commands.status import fetch_status
 from sensorimotor.tools.common import free_port
-from sensorimotor.tools.status import fetch_status
 
 #: the body changes of `--changes`, one per world in turn (the Kuka's link 4 and joints 2 and 4)
 CHANGES = (

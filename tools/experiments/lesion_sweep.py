@@ -58,7 +58,7 @@ def table(res: list[dict[str, Any]], radii: list[float]) -> str:
     the end as a fraction of before, and the Welch p of basic vs robust at the end."""
     from scipy import stats
 
-    from sensorimotor.tools.report import ci95, fmt
+    from sensorimotor.tools.experiments.report import ci95, fmt
 
     lines = [
         "| lesion radius (px, centre r px right of the centre) | rule | activation before | right after | at the end "

@@ -5,7 +5,7 @@ Each source is a command and the file it wrote, kept under docs/ (docs/results/N
 of `sme reproduce CHAPTER ... --out DIR`, the stdout of `sme demo` or of a bench's `--json`;
 docs/reproduce/report-quick/: the folder of `sme reproduce all --quick`). A page holds a block between
 ``<!-- BEGIN results: NAME -->`` and ``<!-- END results: NAME -->``;
-`python -m sensorimotor.tools.results_doc PAGE...` rewrites every block from its source and
+`python -m sensorimotor.tools.docgen.results_doc PAGE...` rewrites every block from its source and
 `--check` exits 1 when a page has drifted (tests/test_results_doc.py runs the check). To refresh a
 result: run its command with ``--out DIR``, copy ``DIR/CHAPTER/results.json`` over the stored one,
 and run this module on the pages."""
@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 BLOCK = re.compile(r"(<!-- BEGIN results: ([\w.-]+) -->\n)(.*?)(<!-- END results: \2 -->)", re.S)
 PAGES = (
@@ -31,6 +31,7 @@ PAGES = (
     "docs/commands/bench.md",
     "docs/arm.md",
     "docs/zoo.md",
+    "docs/body-changes.md",
 )
 
 
@@ -97,6 +98,56 @@ def jsonl_table(
     return render_jsonl
 
 
+def zoo_seed_means(rows: tuple[tuple[str, str, str, str], ...]) -> Callable[[Source, str], str]:
+    """A renderer of `sme bench zoo --json` runs kept in several files: per (label, world as the bench
+    names it, file under docs/, the command that wrote it), the means over the file's seeds of the
+    final error, trustworthiness, goal fraction and the sensor-only peers; the worst ratio after
+    convergence (the largest over the seeds) and the false alarms (summed)."""
+
+    def mean(runs: list[dict], key: str) -> float | None:
+        vals = [float(r[key]) for r in runs if r.get(key) is not None]
+        return sum(vals) / len(vals) if vals else None
+
+    def render(src: Source, text: str) -> str:
+        head = (
+            "world",
+            "learner",
+            "final error",
+            "trustworthiness",
+            "goal reached",
+            "PCA",
+            "Isomap",
+            "worst after convergence",
+            "false alarms",
+            "seeds",
+            "command (its output)",
+        )
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for label, world, file, command in rows:
+            found = [json.loads(ln) for ln in (DOCS / file).read_text().splitlines() if ln.strip().startswith("{")]
+            runs = [r for r in found if not r.get("summary") and r.get("world") == world]
+            if not runs:
+                raise ValueError(f"no runs of {world!r} in docs/{file}")
+            worst = [float(r["worst_ratio"]) for r in runs if r.get("worst_ratio") is not None]
+            cells = (
+                label,
+                runs[0].get("learner"),
+                mean(runs, "final_error"),
+                mean(runs, "trustworthiness"),
+                mean(runs, "goal_reached_fraction"),
+                mean(runs, "pca_error"),
+                mean(runs, "isomap_error"),
+                f"{max(worst):.2f}x" if worst else None,
+                sum(int(r.get("drops") or 0) for r in runs),
+                len(runs),
+                f"`{command}` (`docs/{file}`)",
+            )
+            lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+        return "\n".join(lines)
+
+    return render
+
+
 def markdown_file(src: Source, text: str) -> str:
     """A markdown file the command wrote itself (its ``--out FILE.md``), as it is."""
     return f"{text.strip()}\n\n(`docs/{src.file}`, as `{src.command}` wrote it.)"
@@ -104,8 +155,8 @@ def markdown_file(src: Source, text: str) -> str:
 
 def report_summary(src: Source, text: str) -> str:
     """Per chapter of a `sme reproduce all` folder: wall time and the verdicts of its rows, judged
-    again from the chapter's results.json by the report's own rules (tools/report.py)."""
-    from sensorimotor.tools import report
+    again from the chapter's results.json by the report's own rules (tools/experiments/report.py)."""
+    from sensorimotor.tools.experiments import report
 
     meta = json.loads(text)
     folder = (DOCS / src.file).parent
@@ -290,6 +341,77 @@ SOURCES["bench-fuzz"] = Source(
         )
     ),
 )
+SOURCES["zoo-continuous"] = Source(
+    "sme bench zoo --seeds 3 --json --world NAME",
+    "results/bench-zoo-mountaincar/runs.jsonl",
+    zoo_seed_means(
+        (
+            (
+                "MountainCar-v0",
+                "MountainCar",
+                "results/bench-zoo-mountaincar/runs.jsonl",
+                "sme bench zoo --seeds 3 --world MountainCar",
+            ),
+            (
+                "MountainCarContinuous-v0, padded sum",
+                "MountainCarContinuous",
+                "results/bench-zoo-mountaincar/runs.jsonl",
+                "(the same command)",
+            ),
+            (
+                "MountainCarContinuous-v0, DTW (`distance=dtw`)",
+                "MountainCarContinuous, DTW",
+                "results/bench-zoo-mountaincar/runs.jsonl",
+                "(the same command)",
+            ),
+            (
+                "PandaReach-v3, hand position, padded sum",
+                "PandaReach (state)",
+                "results/bench-zoo-panda/state-padded.jsonl",
+                'sme bench zoo --seeds 3 --world "PandaReach (state)"',
+            ),
+            (
+                "PandaReach-v3, hand position, net moves, half moves (`distance=net`, `action_scale=0.5`)",
+                "PandaReach (state), net move, half moves",
+                "results/bench-zoo-panda/state-net-half-moves.jsonl",
+                'sme bench zoo --seeds 3 --world "PandaReach (state), net move"',
+            ),
+            (
+                "PandaReach-v3, 64 x 64 grey frames (`observe=pixels`), net moves, half moves, whole-move warm-up (`motor_scale=1`)",
+                "PandaReach (pixels), half moves, whole-move warm-up",
+                "results/bench-zoo-panda/pixels-ranked-by-ends.jsonl",
+                "sme bench zoo --seeds 3 --world pixels --workers 2",
+            ),
+        )
+    ),
+)
+
+
+def _bench_changes(name: str) -> Callable[[Source, str], str]:
+    """A renderer of tools/bench/changes.py (imported when a page is rendered)."""
+
+    def render(src: Source, text: str) -> str:
+        from sensorimotor.tools.bench import changes
+
+        return str(getattr(changes, name)(src, text))
+
+    return render
+
+
+SOURCES["demo-perturb"] = Source(
+    "sme demo --world gym:FrozenLake-v1 --param map_name=8x8 --param is_slippery=false --perturb permute@3000 "
+    "--seconds 40",
+    "results/demo-perturb/output.txt",
+    demo_output,
+)
+SOURCES["bench-changes"] = Source(
+    "sme bench changes --seeds 3 --json", "results/bench-changes/runs.jsonl", _bench_changes("render_scorecard")
+)
+SOURCES["bench-changes-life"] = Source(
+    "sme bench changes --life 20 --seeds 1 --json",
+    "results/bench-changes-life/runs.jsonl",
+    _bench_changes("render_life"),
+)
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
 QUICK_ALL = "sme reproduce all --quick --runs 10"
 SOURCES["report-quick"] = Source(QUICK_ALL, "reproduce/report-quick/run.json", report_summary)
@@ -320,7 +442,7 @@ def rewrite(text: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sensorimotor.tools.results_doc", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m sensorimotor.tools.docgen.results_doc", description=__doc__)
     p.add_argument("pages", nargs="*", help=f"pages to rewrite (default: {', '.join(PAGES)})")
     p.add_argument("--check", action="store_true", help="exit 1 if a page's blocks differ from their sources")
     args = p.parse_args(argv)

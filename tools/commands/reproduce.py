@@ -154,7 +154,7 @@ def _where(args: argparse.Namespace) -> str:
 def _header(
     args: argparse.Namespace, names: list[str], chapters: list[Any], total: float | None, sittings: int = 1
 ) -> dict[str, str]:
-    from sensorimotor.tools import report
+    from sensorimotor.tools.experiments import report
 
     env = report.environment(os.path.dirname(os.path.abspath(__file__)))
 
@@ -179,7 +179,7 @@ def _header(
 def _chapter_report(name: str, res: dict, out: str, seconds: float, quick: bool) -> Any:
     import glob
 
-    from sensorimotor.tools import report
+    from sensorimotor.tools.experiments import report
 
     rows = report.chapter_rows(name, res, quick)
     figures = sorted(glob.glob(os.path.join(out, "*.png")))
@@ -200,7 +200,7 @@ def _names(args: argparse.Namespace) -> list[str] | None:
 def report_only(args: argparse.Namespace) -> int:
     """`sme reproduce all --report-only`: judge the chapters' results.json in OUT again and rewrite the
     report (wall times from OUT/run.json when the run wrote one, else unknown)."""
-    from sensorimotor.tools import report
+    from sensorimotor.tools.experiments import report
 
     names = _names(args)
     if names is None:
@@ -271,7 +271,7 @@ def main_all(args: argparse.Namespace) -> int:
     """`sme reproduce all`: every chapter in turn (a failure is recorded and the rest run), then the report."""
     import traceback
 
-    from sensorimotor.tools import report
+    from sensorimotor.tools.experiments import report
 
     if getattr(args, "report_only", False):
         return report_only(args)
