@@ -135,8 +135,13 @@ class GenericBase(Program):
     def stochastic(self, value: bool) -> None:
         if bool(value) != self.stochastic:
             # trace scores change their measure (absolute vs relative to the accepted traces): the
-            # detector's reference must be learned afresh, or the change of scale reads as a drop
-            self.rebase_performance()
+            # detector's reference must be learned afresh, or the change of scale reads as a drop -
+            # except where that drop is true: a world watched as deterministic whose outcomes now
+            # alternate has changed (an action that acts late, a sensor lesion that makes states look
+            # alike), and its detector must see the accepted policy's scores fall, not a new scale
+            changed = value and getattr(self, "_watching", False) and getattr(self, "_accepted", None) is not None
+            if not changed:
+                self.rebase_performance()
             self._held = 0
             best = getattr(self, "_best", None)
             if not value and (best is None or best[0] < self.params.watch_after):

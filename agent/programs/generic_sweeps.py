@@ -243,8 +243,9 @@ class GenericSweeps(GenericBase):
         # scores held back as their traces ended (see `_sweep_act`) are fed when they are absolute
         # (a stochastic world, or nothing accepted yet), never when relative to the accepted traces
         absolute = self.stochastic or self._accepted_reached is None
+        exact = self._exact_plan()
         if self._watching and not self._checking and better and not same and self.tabular and not self.stochastic:
-            if traces != self._candidate_traces:
+            if traces != self._candidate_traces and not exact:
                 # a better policy, seen once: published when the next policy iteration keeps its
                 # traces - a policy still changing from one iteration to the next has not converged,
                 # and the maps of its passing detours can be far worse than the accepted one
@@ -258,6 +259,7 @@ class GenericSweeps(GenericBase):
             and not self.stochastic
             and traces != self._candidate_traces
             and self._relearn_unconfirmed < self.RELEARN_CONFIRM
+            and not exact
         ):
             # relearning after a body change: the first policies that reach the goal again still
             # change from one iteration to the next, and the map of their detours can be far off
@@ -294,6 +296,13 @@ class GenericSweeps(GenericBase):
         self._embed(step, relearned, k)
         self._checking = False
         return None
+
+    def _exact_plan(self) -> bool:
+        """Whether the swept policy is the exact shortest way: the model learner's plan over a
+        complete model of a deterministic world. Such a policy needs no second sweep to show it has
+        converged (the confirmations above are for learners whose policy changes between iterations),
+        so a relearned map is published at its first good sweep."""
+        return self.model is not None and not self.stochastic and self.model.complete()
 
     def _hold(self, step: int) -> None:
         """A newer policy was not better beyond the noise (stochastic world): one more round the

@@ -13,7 +13,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     from sensorimotor.tools.bench import (
-        changes,
+        changes_cli,
         detectors,
         embedding,
         fuzz,
@@ -37,6 +37,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     soak.add_parser(bsub)
     scale.add_parser(bsub)
     zoo.add_parser(bsub)
-    changes.add_parser(bsub)
+    changes_cli.add_parser(bsub)
     ros2.add_parser(bsub)
     p.set_defaults(func=lambda a: p.print_help() or 2)
