@@ -69,6 +69,7 @@ class GenericSweeps(GenericBase):
         self._ends = {}  # planner: each start's (start, end) this sweep
         self._pending_embedding = None  # what the embed job in flight is of
         self._last_choice = 0  # the action table's row the last sweep step sent
+        self._chance_seen = False
         self.retried_total = 0  # traces run once more before they counted (`_in_doubt`), every sweep
 
     def _choose(self, obs: Observation, trace: list[int]) -> int:
@@ -93,6 +94,7 @@ class GenericSweeps(GenericBase):
 
     def _start_sweep(self, check: bool) -> Decision:
         """Sweep the start states with the newest policy, or (`check`) with the accepted one."""
+        check = check or self._chance_seen
         self._prev, self._prev_x, self._prev_key = None, None, None
         self.phase = "embed"
         self._checking = check
@@ -186,6 +188,16 @@ class GenericSweeps(GenericBase):
         sw = self._sweep
         k = sw.repeats
         self.retried_total += sw.retries
+        if self._chance_seen and self._checking and not self.stochastic:
+            reached_before = self._accepted_reached or []
+            if not any(bool(a) and not r for a, r in zip(reached_before, sw.reached, strict=False)):
+                # the accepted policy reaches every goal it reached: the body is as it was, and the
+                # outcomes that alternated are chance (or states that look alike)
+                self._chance_seen, self._checking, self.phase = False, False, "explore"
+                self._become_stochastic(step)
+                return None
+            # it misses some: their zeros reach the detector, and the accepted policy is checked at
+            # every sweep until the drop
         if self.stochastic and k > 1 and all(sw.traces[i] == sw.traces[i - i % k] for i in range(len(sw.traces))):
             # every start's samples were the same trace: the policy controls whatever made the
             # transitions differ (or distinct states looked alike), so one trace per start will do
