@@ -101,6 +101,19 @@ class McapSink:
         self._w.add_message(cid, rec.log_time, rec.data, rec.log_time, rec.sequence)
         self.count += 1
 
+    def write_ros2(self, topic: str, ros_type: str, msgdef: str, log_time: int, data: bytes, sequence: int = 0) -> None:
+        """Append one ROS 2 message (CDR) on channel `topic` with its ``ros2msg`` schema (as rosbag2
+        writes them: Foxglove and the ROS tools decode it)."""
+        key = (topic, "ros2msg:" + ros_type)
+        cid = self._channels.get(key)
+        if cid is None:
+            sid = self._schemas.get(key[1])
+            if sid is None:
+                sid = self._schemas[key[1]] = self._w.register_schema(ros_type, "ros2msg", msgdef.encode())
+            cid = self._channels[key] = self._w.register_channel(topic, "cdr", sid)
+        self._w.add_message(cid, log_time, data, log_time, sequence)
+        self.count += 1
+
     def flush(self) -> None:
         """Close the chunk in progress and push it to the file (a later kill cannot lose it)."""
         self._w.flush()
@@ -117,9 +130,11 @@ def schema_of(encoding: str) -> str:
 
 
 def read(path: str) -> Iterator[Record]:
-    """Every message in write order, up to the end of the file or its last complete chunk."""
+    """Every message in write order, up to the end of the file or its last complete chunk (ROS 2
+    channels, CDR-encoded, are left out: they are for ROS tools)."""
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str]] = {}
+    ros2: set[int] = set()
     with open(path, "rb") as f:
         reader = StreamReader(f, skip_magic=False, emit_chunks=False)
         it = iter(reader.records)
@@ -138,8 +153,12 @@ def read(path: str) -> Iterator[Record]:
             if isinstance(rec, Schema):
                 schemas[rec.id] = rec.name
             elif isinstance(rec, Channel):
+                if rec.message_encoding == "cdr":  # a ROS 2 topic (`sme record --ros2`): for ROS tools, not replayed
+                    ros2.add(rec.id)
                 channels[rec.id] = (rec.topic, schemas.get(rec.schema_id, ""))
             elif isinstance(rec, Message):
+                if rec.channel_id in ros2:
+                    continue
                 topic, schema = channels.get(rec.channel_id, ("?", ""))
                 yield Record(topic, schema, rec.log_time, bytes(rec.data), rec.sequence)
 

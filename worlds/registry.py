@@ -115,6 +115,11 @@ def _outside_kind(name: str) -> WorldKind | None:
 
 
 GYM_KIND = WorldKind("gym_world", "GymWorld", "GymWorldParams", "any Gymnasium environment")
+#: a ROS 2 robot (`sme world ros2 --robot FILE.toml`, docs/ros2.md): not in WORLDS, which lists the
+#: kinds that build from their defaults alone
+ROS2_KIND = WorldKind(
+    "ros2.world", "Ros2World", "Ros2WorldParams", "a ROS 2 robot over rmw_zenoh, mapped by a robot file (--robot FILE)"
+)
 
 
 def world_kind(name: str) -> WorldKind:
@@ -122,6 +127,8 @@ def world_kind(name: str) -> WorldKind:
     the known kinds otherwise."""
     if name.startswith(GYM_PREFIX):
         return GYM_KIND
+    if name == "ros2":
+        return ROS2_KIND
     if name in WORLDS:
         return WORLDS[name]
     outside = _outside_kind(name)

@@ -241,7 +241,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         self._accepted, self._best, self._checking = None, None, False
         self._best_disparity = None
         self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
-        self._relearn_unconfirmed = 0
+        self._relearn_unconfirmed, self._chance_seen = 0, False
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
         self._rotations = None

@@ -32,6 +32,9 @@ from sensorimotor.tools.mcap_io import COMPRESSIONS, McapSink, Record, schema_of
 
 log = logging.getLogger("sme.record")
 
+#: the encoding `Recorder.add_ros2` queues ROS 2 messages under (never a zenoh encoding of ours)
+ROS2_ENCODING = "ros2msg;"
+
 #: errno values that mean "no room left": the disk or the user's quota is full
 DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 
@@ -161,6 +164,7 @@ class Recorder:
         self._last_step: dict[str, int] = {}  # obs key -> last observation step seen
         self._worlds: set[str] = set()
         self._seq = 0
+        self._ros2_defs: dict[str, str] = {}  # ROS 2 type -> its message definition (add_ros2)
 
     def _fail(self, e: OSError, when: str) -> None:
         """Remember the first write error and stop writing (the file keeps its complete chunks)."""
@@ -183,6 +187,11 @@ class Recorder:
             self._backlog_bytes += len(msg.payload)
             self.max_backlog = max(self.max_backlog, len(self._queue))
             self._cv.notify()
+
+    def add_ros2(self, sample: Any) -> None:
+        """Queue one ROS 2 message (a `worlds.ros2.tap.TappedSample`) for its own ``ros2msg`` channel."""
+        self._ros2_defs.setdefault(sample.ros_type, sample.msgdef)
+        self._on(BusMessage(sample.topic, sample.payload, ROS2_ENCODING + sample.ros_type))
 
     def _count_gap(self, msg: BusMessage) -> None:
         """Count the observation steps of a world that never reached the recorder (a lockstep world
@@ -239,7 +248,11 @@ class Recorder:
                 self._backlog_bytes = 0
             for t, msg in batch:
                 self._seq += 1
-                self._sink.write(Record(msg.key, schema_of(msg.encoding), t, msg.payload, self._seq))
+                if msg.encoding.startswith(ROS2_ENCODING):
+                    rt = msg.encoding[len(ROS2_ENCODING) :]
+                    self._sink.write_ros2(msg.key, rt, self._ros2_defs[rt], t, msg.payload, self._seq)
+                else:
+                    self._sink.write(Record(msg.key, schema_of(msg.encoding), t, msg.payload, self._seq))
                 self.by_key[msg.key] += 1
             if time.monotonic() - last_flush >= self.flush_every:
                 self._sink.flush()
@@ -306,6 +319,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="largest chunk in KB (default 1024). Chunks are also closed every 0.2 s, so a kill loses at most "
         "that; larger chunks compress better and mean fewer chunk-index entries held until the file is finished",
     )
+    p.add_argument(
+        "--ros2",
+        default=None,
+        metavar="ENDPOINT",
+        help="also record every topic of the ROS 2 robot whose rmw_zenohd router is at ENDPOINT, as CDR with "
+        "its ros2msg schema (the channels rosbag2 and Foxglove read; docs/ros2.md)",
+    )
+    p.add_argument("--ros2-domain", type=int, default=0, metavar="N", help="the robot's ROS_DOMAIN_ID (default 0)")
     add_bus_arguments(p, "reader")
     p.set_defaults(func=main_args)
 
@@ -333,6 +354,16 @@ def main_args(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     with bus:
         rec = Recorder(bus, args.file, args.keys, args.compression, args.chunk_kb * 1024, stream=out).start()
+        tap = None
+        if args.ros2:
+            from sensorimotor.worlds.ros2.tap import RosTap
+
+            try:
+                tap = RosTap(args.ros2, rec.add_ros2, args.ros2_domain)
+            except BusError as e:
+                rec.stop()
+                print(f"sme record: the ROS 2 router at {args.ros2}: {e}", file=sys.stderr)
+                return 2
         print(f"sme record: recording {args.keys} to {args.file}; Ctrl-C stops", file=sys.stderr, flush=True)
         next_tick = 5.0
         while not stop.is_set() and not rec.failed.is_set():
@@ -348,6 +379,8 @@ def main_args(args: argparse.Namespace) -> int:
                     flush=True,
                 )
             stop.wait(0.1)
+        if tap is not None:
+            tap.close()
         rec.stop()
     el = time.monotonic() - t0
     if rec.error is not None:

@@ -24,7 +24,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "agent's action k (resend after --resend seconds, then keep waiting). The agent "
         "discovers it by liveliness. Worlds: " + ", ".join(sorted(WORLDS)) + ", and gym:ENV_ID for any "
         "Gymnasium environment (gym:module:ENV_ID imports module first, from the current folder too; the "
-        "environment's keyword arguments as --param k=v). "
+        "environment's keyword arguments as --param k=v), and `ros2 --robot FILE.toml` for a ROS 2 robot over "
+        "rmw_zenoh (docs/ros2.md). "
         "Stop with Ctrl-C; the agent pauses the link and resumes when the world returns.",
     )
     p.add_argument("name", nargs="?", help="world kind: " + ", ".join(sorted(WORLDS)) + ", or gym:ENV_ID")
@@ -42,6 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="print the world's parameters (name, type, default, doc) and exit; without NAME, every world's",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the world's random generator")
+    p.add_argument(
+        "--robot", default=None, metavar="FILE", help="ros2: the robot file (TOML) mapping its topics (docs/ros2.md)"
+    )
     p.add_argument(
         "--external",
         action="store_true",
@@ -108,6 +112,8 @@ def main_args(args: argparse.Namespace) -> int:
         return 2
     try:
         params = assignments(args.param)
+        if args.robot is not None:
+            params["robot"] = args.robot
         world_kind(args.name)
     except ParamError as e:
         print(f"sme world: {e}", file=sys.stderr)
@@ -138,6 +144,9 @@ def main_args(args: argparse.Namespace) -> int:
             external=args.external,
             lease_ttl=args.lease_ttl,
         )
+        offer = getattr(world, "offer_embeddings", None)  # a ROS 2 robot: embeddings on a ROS 2 topic too
+        if offer is not None:
+            offer(bus, node.world_id)
         node.install_signal_handlers()
         stats = node.run()
     summary = stats.summary()

@@ -31,6 +31,7 @@ PAGES = (
     "docs/commands/bench.md",
     "docs/arm.md",
     "docs/zoo.md",
+    "docs/body-changes.md",
 )
 
 
@@ -412,6 +413,33 @@ SOURCES["zoo-continuous"] = Source(
             ),
         )
     ),
+)
+
+
+def _bench_changes(name: str) -> Callable[[Source, str], str]:
+    """A renderer of tools/bench/changes.py (imported when a page is rendered)."""
+
+    def render(src: Source, text: str) -> str:
+        from sensorimotor.tools.bench import changes
+
+        return str(getattr(changes, name)(src, text))
+
+    return render
+
+
+SOURCES["demo-perturb"] = Source(
+    "sme demo --world gym:FrozenLake-v1 --param map_name=8x8 --param is_slippery=false --perturb permute@3000 "
+    "--seconds 40",
+    "results/demo-perturb/output.txt",
+    demo_output,
+)
+SOURCES["bench-changes"] = Source(
+    "sme bench changes --seeds 3 --json", "results/bench-changes/runs.jsonl", _bench_changes("render_scorecard")
+)
+SOURCES["bench-changes-life"] = Source(
+    "sme bench changes --life 20 --seeds 1 --json",
+    "results/bench-changes-life/runs.jsonl",
+    _bench_changes("render_life"),
 )
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
 QUICK_ALL = "sme reproduce all --quick --runs 10"
