@@ -140,7 +140,7 @@ def zoo_seed_means(rows: tuple[tuple[str, str, str, str], ...]) -> Callable[[Sou
                 f"{max(worst):.2f}x" if worst else None,
                 sum(int(r.get("drops") or 0) for r in runs),
                 len(runs),
-                f"`{command}` (`docs/{file}`)",
+                (command if command.startswith("(") else f"`{command}`") + f" (`docs/{file}`)",
             )
             lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
         return "\n".join(lines)
