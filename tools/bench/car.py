@@ -20,8 +20,7 @@ from typing import Any
 
 #: where a car step's time goes: category -> the functions whose cumulative time it is (file, name)
 CATEGORIES: dict[str, tuple[tuple[str, str], ...]] = {
-    "rendering": (("worlds/vergence.py", "render"),),
-    "perceptual goal (world)": (("worlds/mountaincar.py", "perceptual_goal"),),
+    "rendering (PyBullet; the world's perceptual-goal search included)": (("worlds/vergence.py", "render"),),
     "vergence policy": (("agent/programs/vergence.py", "foveal_difference"), ("agent/learners/lspi.py", "greedy")),
     "embedding lookup": (("agent/programs/mountaincar.py", "position"), ("agent/programs/mountaincar.py", "_recalled")),
     "learner (Sarsa, velocity filter)": (
