@@ -76,7 +76,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "chapter9) and writes OUT/report.md and OUT/report.html: each claim of the dissertation beside ours with a "
         "95 % CI and a verdict; a chapter that fails is reported and the others still run.",
     )
-    p.add_argument("chapter", choices=sorted(CHAPTERS) + ["all"], help="which experiment, or all")
+    p.add_argument(
+        "chapter",
+        choices=sorted(CHAPTERS) + ["all"],
+        metavar="CHAPTER",
+        help="which experiment (" + ", ".join(sorted(CHAPTERS)) + "), or all",
+    )
     p.add_argument("--runs", type=int, default=10, help="seeded runs per condition (default 10)")
     p.add_argument(
         "--quick",
