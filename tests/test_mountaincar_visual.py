@@ -223,37 +223,3 @@ def test_recalled_readings_give_the_same_run_in_fewer_world_steps_and_a_wrong_on
     assert runs[0][0] == runs[64][0]  # the same evaluations, step for step
     assert runs[64][1] < 0.7 * runs[0][1], runs  # in fewer world steps (most of the rest: learning to verge)
 
-
-def test_the_velocity_filter_follows_the_car_in_the_embeddings_units(world):
-    """Issue 38's ablation: the Kalman velocity was the stage that cost the most steps to the goal,
-    its process noise set in squared vergence steps (the car's acceleration read as if a vergence
-    step were a unit of track). In squares of the embedding's span, it follows the car's velocity,
-    read off positions quantised to whole vergence steps, with less than half the error."""
-    from sensorimotor.agent.learners.kalman_velocity import VelocityFilter
-    from sensorimotor.worlds.mountaincar_dynamics import random_state
-
-    def angle(x):  # the vergence steps that fixate the sign from track position x (0.01 rad a step)
-        return np.arctan2(0.5, 3.0 - x) / 0.01
-
-    prog = MountainCarProgram(world.spec(), seed=0)
-    prog._coords0 = np.round(angle(np.linspace(-2.0, 1.9, 21)[:-1]))[:, None]
-    prog.quantum = 1.0
-    rng = np.random.default_rng(0)
-    errs: dict[str, list[float]] = {"embedding's units": [], "vergence steps (before)": []}
-    for _ in range(30):
-        x, v = random_state(rng)
-        filters = {
-            "embedding's units": prog._filter(),
-            "vergence steps (before)": VelocityFilter(measurement_var=1 / 12, process_var=1e-5),
-        }
-        for f in filters.values():
-            f.reset(float(np.round(angle(x))))
-        for _ in range(200):
-            x0 = x
-            x, v, done = car_step(x, v, 1 if v >= 0 else -1)
-            if done:
-                break
-            for k, f in filters.items():
-                errs[k].append(f.update(float(np.round(angle(x))))[1] - (angle(x) - angle(x0)))
-    rmse = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in errs.items()}
-    assert rmse["embedding's units"] < 0.5 * rmse["vergence steps (before)"], rmse  # 0.089 vs 0.238

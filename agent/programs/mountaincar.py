@@ -70,12 +70,7 @@ class MountainCarProgramParams:
     n_eval: int | None = option(None, "evaluation states used (none: all the world offers)", min=0)
     watch_after: int = option(50_000, "training car steps before episodes report performance", min=0)
     report_after: int = option(400, "car steps after which a trained driver gives up an episode", min=1)
-    process_var: float = option(
-        2e-6,
-        "process variance of the velocity Kalman filter, in squares of the first embedding's span (the car's "
-        "velocity changes by up to 0.1 % of its track per step)",
-        min=0.0,
-    )
+    process_var: float = option(1e-5, "process variance of the velocity Kalman filter", min=0.0)
     policy_map: int = option(
         0, "clusters of a policy map of the drive traces emitted after each evaluation (0: none; ch. 9.6)", min=0
     )
@@ -271,12 +266,8 @@ class MountainCarProgram(Program):
         )
 
     def _filter(self) -> VelocityFilter:
-        """Measurement noise: a position is quantised to one vergence step (uniform, variance q^2/12).
-        Process noise: `process_var` times the squared span of the first embedding, the units the
-        car's velocity is read in (issue 38: in squared vergence steps, as before, the velocity
-        lagged the car, and it was the stage that cost the most steps to the goal)."""
-        span = float(np.ptp(self._coords0)) if self._coords0 is not None else self.quantum
-        return VelocityFilter(measurement_var=self.quantum**2 / 12, process_var=self.process_var * span**2)
+        """Measurement noise: a position is quantised to one vergence step (uniform, variance q^2/12)."""
+        return VelocityFilter(measurement_var=self.quantum**2 / 12, process_var=self.process_var * self.quantum**2)
 
     @property
     def evaluating(self) -> bool:
