@@ -222,4 +222,3 @@ def test_recalled_readings_give_the_same_run_in_fewer_world_steps_and_a_wrong_on
                 assert not any(prog._recall.get(v) == p for v, p in wrong.items())  # a check differed: forgotten
     assert runs[0][0] == runs[64][0]  # the same evaluations, step for step
     assert runs[64][1] < 0.7 * runs[0][1], runs  # in fewer world steps (most of the rest: learning to verge)
-
