@@ -518,6 +518,14 @@ class MountainCarProgram(Program):
             "curve": [list(c) for c in self.curve],
             "episode_log": [list(e) for e in self.episode_log],
             "relearn_at": self.relearn_at,
+            # the remembered readings, so a restored program recalls (and checks) as this one would
+            "recall_views": np.array([np.frombuffer(v, dtype=np.uint8) for v in self._recall], dtype=np.uint8)
+            if self._recall
+            else None,
+            "recall_positions": [float(p) for p in self._recall.values()],
+            "recalls": self._recalls,
+            "view": None if self._view is None else np.frombuffer(self._view, dtype=np.uint8).copy(),
+            "checking": self._checking,
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -570,6 +578,19 @@ class MountainCarProgram(Program):
         self.curve = [(int(n), float(m)) for n, m in state["curve"]]
         self.episode_log = [(int(n), int(k)) for n, k in state["episode_log"]]
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
+        views = state.get("recall_views")
+        self._recall = (
+            {}
+            if views is None
+            else {
+                np.asarray(v, dtype=np.uint8).tobytes(): float(p)
+                for v, p in zip(views, state["recall_positions"], strict=True)
+            }
+        )
+        self._recalls = int(state.get("recalls", 0))
+        view = state.get("view")
+        self._view = None if view is None else np.asarray(view, dtype=np.uint8).tobytes()
+        self._checking = None if state.get("checking") is None else float(state["checking"])
 
     def world_restarted(self) -> None:
         """Drop the pending vergence sample and restart the trace and episode in progress."""
