@@ -41,15 +41,15 @@ import shutil
 import tempfile
 import xml.etree.ElementTree as ET
 from collections import OrderedDict
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 import pybullet as p
-import pybullet_data
 
 from sensorimotor.protocol.messages import ActionSpace, Control, SensorSpec, Truth, WorldSpec
-from sensorimotor.protocol.params import ParamError, option, parse
+from sensorimotor.protocol.params import ParamError, parse
+from sensorimotor.worlds.arm_params import ArmWorldParams, GainParams, JointParams, MorphParams, ReverseParams
+from sensorimotor.worlds.arm_urdf import morph_urdf, resolve_urdf, scalable_links
 from sensorimotor.worlds.base import HealParams, PerturbationError, StepResult, World
 from sensorimotor.worlds.bullet import direct_client, disconnect
 
@@ -58,172 +58,11 @@ MARKER_COLOURS = ((0.0, 1.0, 0.0), (1.0, 0.0, 1.0), (0.0, 1.0, 1.0), (1.0, 0.0, 
 _CACHE = 4096  # rendered observations kept (lattice poses repeat; off-lattice ones need a bound)
 
 
-@dataclass(frozen=True)
-class ArmWorldParams:
-    """Parameters of the arm world."""
-
-    urdf: str = option("kuka_iiwa/model.urdf", "the robot: a path inside pybullet_data or a URDF file of your own")
-    joints: tuple[str, ...] = option((), "names of the moving joints (empty: the n_joints that move the hand most)")
-    n_joints: int = option(2, "moving joints when `joints` is empty", min=1, max=7)
-    hand: str = option("", "the hand link the marker rides on (empty: the end of the chain)")
-    lattice: int = option(7, "start angles per moving joint (the start states: lattice^joints poses)", min=2, max=15)
-    starts: int = option(
-        0,
-        "start poses drawn from the lattice (seeded by the world's seed); 0: the whole lattice up to 4 moving "
-        "joints, 128 drawn beyond",
-        min=0,
-        max=4096,
-    )
-    goal_steps: int | None = option(
-        None,
-        "the goal is reached with every moving joint within this many steps (and a half) of the goal pose; "
-        "none: 0 up to 4 moving joints, 1 beyond (a single pose of a 7-joint lattice is too rare to be found)",
-        min=0,
-        max=3,
-    )
-    bend: float = option(
-        0.4, "the moving joints' angle at the lattice's centre, rad (nearest limit if outside)", min=-3.2, max=3.2
-    )
-    step: float = option(0.2, "joint increment of one action, rad (also the lattice spacing)", min=0.01, max=1.0)
-    image: int = option(48, "camera image side, px (grey)", min=16, max=128)
-    goal_image: int = option(96, "image side, px, the perceptual goal is found on", min=32, max=256)
-    fov: float = option(50.0, "camera field of view, degrees", min=10.0, max=120.0)
-    marker: float = option(0.04, "marker radius, m", min=0.005, max=0.5)
-    proprioception: bool | None = option(
-        None, "also serve the moving joints' angles as sensor `joints` (none: for 5 or more moving joints)"
-    )
-    actions: str = option(
-        "discrete", "discrete (+-step per joint) or box (an increment per joint)", choices=("discrete", "box")
-    )
-    max_episode_steps: int = option(0, "actions after which an episode ends (0: 4 x the lattice's diameter)", min=0)
-
-
-@dataclass(frozen=True)
-class MorphParams:
-    """Scale a link's length (its child joints' offsets and its shapes along them) by `scale`;
-    the URDF is rewritten and the body reloaded in place, the pose kept (morphs multiply)."""
-
-    link: str = option("", "the link to scale (empty: the link after the first moving joint)")
-    scale: float = option(1.3, "length factor", min=0.5, max=2.0)
-
-
-@dataclass(frozen=True)
-class JointParams:
-    """Lock a moving joint (a second lesion of it frees it); every start then shares its angle."""
-
-    joint: str = option("", "the moving joint (empty: the first)")
-    at: float | None = option(
-        None, "lock it at this angle, rad, within the lattice's range (none: where it is)", min=-6.3, max=6.3
-    )
-
-
-@dataclass(frozen=True)
-class ReverseParams:
-    """Flip a moving joint's command sign (a second reverse restores it)."""
-
-    joint: str = option("", "the moving joint (empty: the first)")
-
-
-@dataclass(frozen=True)
-class GainParams:
-    """Scale a moving joint's step (replaces an earlier gain of it)."""
-
-    joint: str = option("", "the moving joint (empty: the first)")
-    gain: float = option(1.5, "step factor", min=0.25, max=4.0)
-
-
 def colour_mask(rgb: np.ndarray, colour: tuple[float, float, float], margin: float = 0.35) -> np.ndarray:
     """Pixels of `rgb` ([H, W, 3] in [0, 1]) of the pure colour `colour`, whatever their shading:
     each channel that is on in `colour` exceeds every channel that is off by `margin`."""
     on = np.array(colour) > 0.5
     return rgb[..., on].min(axis=-1) - rgb[..., ~on].max(axis=-1) > margin
-
-
-def resolve_urdf(path: str) -> str:
-    """`path` as a file: itself if it exists, else inside `pybullet_data`; a ParamError otherwise."""
-    for cand in (os.path.expanduser(path), os.path.join(pybullet_data.getDataPath(), path)):
-        if os.path.isfile(cand):
-            return os.path.abspath(cand)
-    raise ParamError(f"arm: urdf {path!r} is neither a file nor in pybullet_data ({pybullet_data.getDataPath()})")
-
-
-def _rpy_matrix(rpy: np.ndarray) -> np.ndarray:
-    r, pch, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(pch), math.sin(pch), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def _vec(text: str | None, default: float = 0.0) -> np.ndarray:
-    return np.array([float(v) for v in text.split()]) if text else np.full(3, default)
-
-
-def _fmt(v: np.ndarray) -> str:
-    return " ".join(f"{x:.9g}" for x in v)
-
-
-def scalable_links(root: ET.Element) -> list[str]:
-    """Links whose length `morph` can scale: those with a child joint at a non-zero offset."""
-    out = []
-    for j in root.iter("joint"):
-        o = j.find("origin")
-        parent = j.find("parent")
-        if parent is not None and o is not None and np.linalg.norm(_vec(o.get("xyz"))) > 1e-9:
-            name = parent.get("link", "")
-            if name not in out:
-                out.append(name)
-    return out
-
-
-def morph_urdf(text: str, base_dir: str, scales: dict[str, float]) -> str:
-    """The URDF `text` with each link of `scales` lengthened by its factor: its child joints'
-    origins scaled, and its visual and collision shapes stretched along the direction of its first
-    child joint; relative mesh paths (also ``package://``) made absolute against `base_dir`."""
-    root = ET.fromstring(text)
-    for mesh in root.iter("mesh"):
-        f = mesh.get("filename", "")
-        rel = f[len("package://") :] if f.startswith("package://") else f
-        if not os.path.isabs(rel) and "://" not in rel:
-            mesh.set("filename", os.path.join(base_dir, rel))
-    links = {lk.get("name"): lk for lk in root.iter("link")}
-    for name, s in scales.items():
-        offsets = []
-        for j in root.iter("joint"):
-            parent = j.find("parent")
-            o = j.find("origin")
-            if parent is None or parent.get("link") != name or o is None:
-                continue
-            xyz = _vec(o.get("xyz"))
-            if np.linalg.norm(xyz) > 1e-9:
-                offsets.append(xyz)
-                o.set("xyz", _fmt(xyz * s))
-        if not offsets:
-            raise ValueError(f"link {name!r} has no child joint at an offset")
-        u = offsets[0] / np.linalg.norm(offsets[0])
-        for part in links[name].findall("visual") + links[name].findall("collision"):
-            o = part.find("origin")
-            if o is None:
-                o = ET.SubElement(part, "origin")
-            xyz, rot = _vec(o.get("xyz")), _rpy_matrix(_vec(o.get("rpy")))
-            o.set("xyz", _fmt(xyz + (s - 1.0) * float(xyz @ u) * u))
-            local = np.abs(rot.T @ u)  # the stretch direction in the shape's own frame
-            stretch = 1.0 + (s - 1.0) * local
-            g = part.find("geometry")
-            shape = g[0] if g is not None and len(g) else None
-            if shape is None:
-                continue
-            if shape.tag == "mesh":
-                shape.set("scale", _fmt(_vec(shape.get("scale"), 1.0) * stretch))
-            elif shape.tag == "box":
-                shape.set("size", _fmt(_vec(shape.get("size")) * stretch))
-            elif shape.tag == "cylinder" and local[2] > 0.9:
-                shape.set("length", f"{float(shape.get('length', '0')) * s:.9g}")
-    return ET.tostring(root, encoding="unicode")
 
 
 class ArmWorld(World):
@@ -700,3 +539,18 @@ class ArmWorld(World):
 
 
 __all__ = ["ArmWorld", "ArmWorldParams", "morph_urdf", "resolve_urdf", "scalable_links"]
+
+
+# names importable from here as before the split
+__all__ = [
+    "ArmWorld",
+    "ArmWorldParams",
+    "GainParams",
+    "JointParams",
+    "MorphParams",
+    "ReverseParams",
+    "colour_mask",
+    "morph_urdf",
+    "resolve_urdf",
+    "scalable_links",
+]
