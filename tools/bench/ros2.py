@@ -49,6 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--change", choices=sorted(CHANGES), default="reverse", help="learn: the body change made once learned"
     )
     p.add_argument("--learn-rate", type=float, default=50.0, help="learn: the stand-in's rate, Hz (default 50)")
+    p.add_argument("--change-at", type=int, default=3000, help="learn: make the change once this many steps are taken")
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
     p.set_defaults(func=main_args)
 
