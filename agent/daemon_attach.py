@@ -16,13 +16,7 @@ from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import BusError
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
-from sensorimotor.protocol.messages import (
-    EXTERNAL_PROGRAM,
-    EventKind,
-    Truth,
-    WorldSpec,
-    clip,
-)
+from sensorimotor.protocol.messages import EXTERNAL_PROGRAM, EventKind, Truth, WorldSpec, clip
 
 log = logging.getLogger("sme.agent")
 

@@ -6,23 +6,14 @@ from __future__ import annotations
 
 import logging
 
-from sensorimotor.agent.checkpoint import (
-    MAX_VERSION,
-)
+from sensorimotor.agent.checkpoint import MAX_VERSION
 from sensorimotor.agent.daemon_share import Sharing
 from sensorimotor.agent.lease import lost_by
 from sensorimotor.agent.link import WorldLink, check_truth
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import BusMessage
 from sensorimotor.protocol.errors import ProtocolError, SpecMismatch
-from sensorimotor.protocol.messages import (
-    Embedding,
-    SharedCheckpoint,
-    Truth,
-    WorldEvent,
-    WorldEventKind,
-    clip,
-)
+from sensorimotor.protocol.messages import Embedding, SharedCheckpoint, Truth, WorldEvent, WorldEventKind, clip
 
 log = logging.getLogger("sme.agent")
 

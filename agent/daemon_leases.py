@@ -11,9 +11,7 @@ import time
 from sensorimotor.agent.daemon_status import Reporting
 from sensorimotor.agent.lease import Outcome
 from sensorimotor.agent.ownership import claim_key
-from sensorimotor.protocol.messages import (
-    EventKind,
-)
+from sensorimotor.protocol.messages import EventKind
 
 log = logging.getLogger("sme.agent")
 

@@ -10,16 +10,10 @@ import os
 import time
 from typing import Any
 
-from sensorimotor.agent.checkpoint import (
-    MAX_VERSION,
-    write_atomically,
-)
+from sensorimotor.agent.checkpoint import MAX_VERSION, write_atomically
 from sensorimotor.agent.daemon_state import DaemonState
 from sensorimotor.protocol import codec, keys
-from sensorimotor.protocol.messages import (
-    AgentEvent,
-    clip,
-)
+from sensorimotor.protocol.messages import AgentEvent, clip
 
 log = logging.getLogger("sme.agent")
 

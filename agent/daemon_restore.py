@@ -23,11 +23,7 @@ from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import keys
 from sensorimotor.protocol.bus import BusError
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import (
-    EventKind,
-    WorldSpec,
-    clip,
-)
+from sensorimotor.protocol.messages import EventKind, WorldSpec, clip
 from sensorimotor.protocol.params import as_strings, parse
 
 log = logging.getLogger("sme.agent")

@@ -19,9 +19,7 @@ from sensorimotor.agent.checkpoint import (
 from sensorimotor.agent.daemon_restore import Restoring
 from sensorimotor.agent.link import WorldLink
 from sensorimotor.protocol import codec, keys
-from sensorimotor.protocol.messages import (
-    SharedCheckpoint,
-)
+from sensorimotor.protocol.messages import SharedCheckpoint
 from sensorimotor.protocol.params import as_strings
 
 log = logging.getLogger("sme.agent")

@@ -10,9 +10,7 @@ from sensorimotor.agent.daemon_inbox import Inbox
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import BusError
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import (
-    AgentStatus,
-)
+from sensorimotor.protocol.messages import AgentStatus
 
 log = logging.getLogger("sme.agent")
 

@@ -1,4 +1,4 @@
-"""The message bus over Eclipse Zenoh: the only module of the project that imports zenoh.
+"""The message bus over Eclipse Zenoh: with `protocol.bus_config`, the only code that imports zenoh.
 
 Sessions are built from the flags zenoh's own examples use (`--mode`, `--connect`, `--listen`,
 `--config`, `--no-multicast-scouting`). The embedded default needs no router and no config: the
@@ -7,327 +7,51 @@ agent daemon is a Zenoh *router* listening on tcp/127.0.0.1:7447 and every other
 viewer see world<->agent traffic). Worlds, recorders and viewers wait for the agent to appear
 (`retry`); query tools fail fast with a hint. Clients reconnect by themselves when the agent
 restarts. Multicast scouting is off and nothing listens beyond loopback.
+
+The session's settings and command-line flags live in `protocol.bus_config`, its plain types
+(`BusError`, `BusMessage`, `Inbox`, `Publisher`) in `protocol.bus_types`; all are importable from
+here as before.
 """
 
 from __future__ import annotations
 
-import argparse
-import collections
-import json
 import logging
-import re
-import socket
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from typing import Any
 
 import zenoh
 
-from sensorimotor.protocol import security
-from sensorimotor.protocol.keys import DEFAULT_ENDPOINT, DEFAULT_SECURE_ENDPOINT
+from sensorimotor.protocol.bus_config import (
+    BLOCKED_LINK_CLOSE_US,
+    READER_LEASE_MS,
+    BusConfig,
+    add_bus_arguments,
+    bus_config_from_args,
+    check_key_expr,
+    refusal,
+    zenoh_words,
+)
+from sensorimotor.protocol.bus_types import BusError, BusMessage, Inbox, Publisher
 
 log = logging.getLogger("sme.bus")
 
-
-def zenoh_words(e: BaseException) -> str:
-    """A zenoh error's message for people: without the Rust source location zenoh appends
-    (`at /root/.cargo/.../orchestrator.rs:447.`), which says nothing to a user."""
-    text = re.sub(r"\s+at\s+\S+\.rs:\d+\.?", "", str(e)).strip().rstrip(".!")
-    if text.startswith("Unable to connect to any of"):
-        return "nothing answered there"
-    return text or type(e).__name__
-
-
-def _listening(endpoint: str, timeout: float = 0.5) -> bool:
-    """Whether something accepts a TCP connection at a tcp/ or tls/ `endpoint` (False otherwise)."""
-    proto, _, rest = endpoint.partition("/")
-    if proto not in ("tcp", "tls"):
-        return False
-    host, _, port = re.split(r"[?#]", rest, maxsplit=1)[0].rpartition(":")
-    try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
-            return True
-    except (OSError, ValueError):
-        return False
-
-
-def refusal(config: BusConfig) -> str | None:
-    """Why a client session was not opened when a router does listen at one of its endpoints: it
-    refused the session's handshake, i.e. its authentication (None: nothing listens there)."""
-    where = [ep for ep in config.connect if _listening(ep)]
-    if not where:
-        return None
-    text = ""
-    if config.config_file:
-        try:
-            with open(config.config_file, encoding="utf-8", errors="replace") as f:
-                text = f.read(1_000_000)
-        except OSError:
-            pass
-    if "usrpwd" in text:
-        how = (
-            f"the user and password of transport/auth/usrpwd in {config.config_file} are not in the router's "
-            "dictionary file"
-        )
-    elif config.secure_dir:
-        how = f"the router does not accept the certificate of {config.secure_dir}"
-    else:
-        how = "the router requires authentication (user/password or TLS) this session does not offer"
-    return f"the router at {where[0]} refused this session: authentication refused ({how})"
-
-
-class BusError(RuntimeError):
-    """The bus could not be opened or used; the message says what to do."""
-
-
-class BusMessage(NamedTuple):
-    """One sample as the bus hands it to callbacks and inboxes.
-
-    Attributes
-    ----------
-    key : str
-        The key expression it was published on.
-    payload : bytes
-        The raw payload (decode it with `codec.decode`).
-    encoding : str
-        Zenoh's encoding string, e.g. ``application/protobuf;sme.v1.Observation``.
-    kind : str
-        ``put``, or ``delete`` (a liveliness token vanished).
-    """
-
-    key: str
-    payload: bytes
-    encoding: str
-    kind: str = "put"  # "put" or "delete"
-
-
-READER_LEASE_MS = 1000  # see BusConfig.for_role
-BLOCKED_LINK_CLOSE_US = 1_000_000  # see BusConfig.zenoh_config
-
-
-@dataclass(frozen=True)
-class BusConfig:
-    """How to open a session: mode, endpoints, and (with `secure_dir`) the credential to present.
-
-    `credential` is the role whose certificate this session presents on a secure bus (`agent`,
-    `world`, `tool`, `perturb`; see `protocol.security`); `secure_dir` the directory made by
-    `sme secure init`. A secure router listens with mutual TLS and enforces the access-control rules
-    of `security.acl_rules()`; a secure client presents its certificate.
-    """
-
-    mode: str = "client"
-    connect: tuple[str, ...] = (DEFAULT_ENDPOINT,)
-    listen: tuple[str, ...] = ()
-    config_file: str | None = None
-    multicast_scouting: bool = False
-    lease_ms: int | None = None
-    retry: bool = False  # client: wait for the router to appear instead of failing
-    credential: str = "tool"
-    secure_dir: str | None = None
-    # False for readers (record, watch, view): a reader that stalls must not hold the publishers'
-    # shared-memory buffers (their pool runs dry and the world's observations fall back to slow copies)
-    shared_memory: bool = True
-
-    ROLES = ("agent", "world", "reader", "tool", "perturb")
-
-    @classmethod
-    def for_role(cls, role: str, endpoint: str | None = None, secure_dir: str | None = None) -> BusConfig:
-        """Embedded defaults per role.
-
-        Parameters
-        ----------
-        role : str
-            ``agent``: router listening on `endpoint` (agent credential); ``world``: client that waits
-            for the agent (world credential; also `sme replay`); ``reader``: client that waits, tool
-            credential (record, watch, view); ``tool``: client that fails fast, tool credential
-            (status); ``perturb``: client that fails fast, perturb credential.
-        endpoint : str, optional
-            Default `tcp/127.0.0.1:7447`, or `tls/127.0.0.1:7447` with `secure_dir`.
-        secure_dir : str, optional
-            Credentials from `sme secure init`: the session uses TLS with this role's certificate.
-        """
-        ep = endpoint or (DEFAULT_SECURE_ENDPOINT if secure_dir else DEFAULT_ENDPOINT)
-        if role == "agent":
-            return cls(mode="router", connect=(), listen=(ep,), credential="agent", secure_dir=secure_dir)
-        clients = {
-            "world": (True, "world"),
-            "reader": (True, "tool"),
-            "tool": (False, "tool"),
-            "perturb": (False, "perturb"),
-        }
-        if role in clients:
-            retry, cred = clients[role]
-            return cls(
-                mode="client",
-                connect=(ep,),
-                listen=(),
-                retry=retry,
-                credential=cred,
-                secure_dir=secure_dir,
-                shared_memory=role != "reader",
-                # a reader frozen or too slow to read its link holds up every BLOCK message routed to
-                # it; the router closes its link after this lease, the reader reconnects when it runs
-                # again and counts what it missed
-                lease_ms=READER_LEASE_MS if role == "reader" else None,
-            )
-        raise ValueError(f"unknown bus role {role!r}; one of {cls.ROLES}")
-
-    def check_secure(self) -> security.Credential | None:
-        """The credential files of a secure session (BusError if missing or if an endpoint is not tls/)."""
-        if not self.secure_dir:
-            return None
-        plain = [e for e in (*self.connect, *self.listen) if not e.startswith("tls/")]
-        if plain:
-            raise BusError(
-                f"--secure needs tls/ endpoints (e.g. {DEFAULT_SECURE_ENDPOINT}), not {', '.join(plain)}: "
-                "anything else would bypass mutual TLS"
-            )
-        try:
-            return security.credential(self.secure_dir, self.credential)
-        except ValueError as e:
-            raise BusError(str(e)) from None
-
-    def zenoh_config(self) -> zenoh.Config:
-        """This configuration as a `zenoh.Config` (BusError for an unknown mode)."""
-        if self.mode not in ("router", "peer", "client"):
-            raise BusError(f"--mode must be router, peer or client, not {self.mode!r}")
-        cfg = zenoh.Config.from_file(self.config_file) if self.config_file else zenoh.Config()
-        cfg.insert_json5("mode", json.dumps(self.mode))
-        cfg.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
-        cfg.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
-        cfg.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
-        cfg.insert_json5("scouting/gossip/enabled", "false" if self.mode != "router" else "true")
-        if self.lease_ms:
-            cfg.insert_json5("transport/link/tx/lease", str(int(self.lease_ms)))
-        if not self.shared_memory:
-            cfg.insert_json5("transport/shared_memory/enabled", "false")
-        if self.mode == "router" and not self.config_file:
-            # a link that cannot take a lockstep (BLOCK) message for this long is closed, so that a
-            # frozen reader stops the routing of the world's messages for at most this long (zenoh's
-            # default is 5 s); a live agent or worker drains its link in microseconds
-            cfg.insert_json5(
-                "transport/link/tx/queue/congestion_control/block/wait_before_close", str(BLOCKED_LINK_CLOSE_US)
-            )
-        cred = self.check_secure()
-        if cred is not None:
-            tls = {
-                "root_ca_certificate": cred.ca,
-                "enable_mtls": True,
-                "connect_certificate": cred.cert,
-                "connect_private_key": cred.key,
-                "verify_name_on_connect": True,
-            }
-            if self.listen:
-                tls.update(listen_certificate=cred.cert, listen_private_key=cred.key)
-            for k, v in tls.items():
-                cfg.insert_json5(f"transport/link/tls/{k}", json.dumps(v))
-            if self.mode != "client":  # routers and peers accept connections: they enforce the rules
-                cfg.insert_json5("access_control", json.dumps(security.acl_rules()))
-        return cfg
-
-    def describe(self) -> str:
-        """One line for logs and --help, e.g. ``client connecting to tcp/127.0.0.1:7447``."""
-        ends = ",".join(self.listen if self.mode == "router" else self.connect) or "-"
-        wait = " (waits for it)" if self.retry and self.mode == "client" else ""
-        sec = f", mutual TLS as {security.common_name(self.credential)}" if self.secure_dir else ""
-        return f"{self.mode} {'listening on' if self.mode == 'router' else 'connecting to'} {ends}{wait}{sec}"
-
-    def exposure_warning(self) -> str | None:
-        """A warning when this is a router listening beyond loopback without `--secure`."""
-        return security.exposure_warning(self.mode, self.listen, bool(self.secure_dir))
-
-
-def add_bus_arguments(parser: argparse.ArgumentParser, role: str) -> None:
-    """Add the zenoh example flags to `parser`, with this role's embedded default explained in --help.
-
-    Parameters
-    ----------
-    parser : argparse.ArgumentParser
-        The command's parser; the flags go in a ``zenoh`` argument group.
-    role : {"agent", "world", "tool"}
-        Whose defaults to show (see `BusConfig.for_role`).
-    """
-    d = BusConfig.for_role(role)
-    g = parser.add_argument_group(
-        "zenoh", f"bus session (default for this command: {d.describe()}; no multicast, loopback only)"
-    )
-    g.add_argument(
-        "--mode", choices=["router", "peer", "client"], default=None, help=f"zenoh session mode (default: {d.mode})"
-    )
-    g.add_argument(
-        "-e",
-        "--connect",
-        action="append",
-        default=None,
-        metavar="ENDPOINT",
-        help="endpoint to connect to, repeatable (default: %s)" % (",".join(d.connect) or "none"),
-    )
-    g.add_argument(
-        "-l",
-        "--listen",
-        action="append",
-        default=None,
-        metavar="ENDPOINT",
-        help="endpoint to listen on, repeatable (default: %s)" % (",".join(d.listen) or "none"),
-    )
-    g.add_argument(
-        "-c",
-        "--config",
-        default=None,
-        metavar="FILE",
-        help="zenoh JSON5 configuration file; the flags above override it",
-    )
-    g.add_argument(
-        "--no-multicast-scouting",
-        action="store_true",
-        help="disable multicast scouting (already the default; accepted for zenoh compatibility)",
-    )
-    g.add_argument(
-        "--multicast-scouting",
-        action="store_true",
-        help="enable multicast scouting (off by default: it reaches beyond this machine)",
-    )
-    cred = d.credential
-    what = "listens with mutual TLS and enforces access control" if role == "agent" else "presents"
-    g.add_argument(
-        "--secure",
-        default=None,
-        metavar="DIR",
-        help=f"locked-down bus with the credentials of `sme secure init DIR`: this command {what} "
-        f"(certificate {cred}.pem, common name {security.common_name(cred)}); endpoints must be tls/ "
-        f"(default {DEFAULT_SECURE_ENDPOINT})",
-    )
-
-
-def bus_config_from_args(args: argparse.Namespace, role: str) -> BusConfig:
-    """The session of a command of `role` from its parsed bus arguments (see `add_bus_arguments`)."""
-    cfg = BusConfig.for_role(role, secure_dir=getattr(args, "secure", None))
-    if args.mode:
-        cfg = replace(cfg, mode=args.mode)
-    if args.connect is not None:
-        cfg = replace(cfg, connect=tuple(args.connect))
-    if args.listen is not None:
-        cfg = replace(cfg, listen=tuple(args.listen))
-    if args.config:
-        cfg = replace(cfg, config_file=args.config)
-    if cfg.mode != "client":
-        cfg = replace(cfg, retry=False)
-    elif args.listen is None:
-        cfg = replace(cfg, listen=())  # a client listens on nothing unless told (not the role's router default)
-    return replace(cfg, multicast_scouting=bool(args.multicast_scouting and not args.no_multicast_scouting))
-
-
-def check_key_expr(expr: str) -> str:
-    """`expr` if it is a valid zenoh key expression, else ValueError saying why (for command-line
-    arguments: a usage error, not a traceback from the subscriber)."""
-    try:
-        zenoh.KeyExpr(expr)
-    except Exception as e:  # noqa: BLE001 - zenoh raises its own ZError
-        why = str(e).split(" at /", 1)[0]  # zenoh appends its source location
-        raise ValueError(f"not a valid key expression: {expr!r} ({why})") from None
-    return expr
+__all__ = [
+    "BLOCKED_LINK_CLOSE_US",
+    "READER_LEASE_MS",
+    "Bus",
+    "BusConfig",
+    "BusError",
+    "BusMessage",
+    "Inbox",
+    "Publisher",
+    "add_bus_arguments",
+    "bus_config_from_args",
+    "check_key_expr",
+    "refusal",
+    "zenoh_words",
+]
 
 
 def _encoding_str(sample: Any) -> str:
@@ -383,52 +107,6 @@ def _collect(start: Callable[[Any], Any], timeout: float) -> tuple[list[Any], bo
             len(got),
         )
     return list(got), over and time.monotonic() - t0 < timeout * 0.95
-
-
-class Inbox:
-    """A bounded queue filled by a subscriber: when full, the oldest message is dropped and counted."""
-
-    def __init__(self, maxsize: int) -> None:
-        if maxsize < 1:
-            raise ValueError("maxsize must be >= 1")
-        self.maxsize = maxsize
-        self._q: collections.deque[BusMessage] = collections.deque()
-        self._cv = threading.Condition()
-        self.dropped = 0
-        self._closed = False
-
-    def push(self, msg: BusMessage) -> None:
-        """Append `msg`, dropping (and counting in `dropped`) the oldest one when full."""
-        with self._cv:
-            if len(self._q) >= self.maxsize:
-                self._q.popleft()
-                self.dropped += 1
-            self._q.append(msg)
-            self._cv.notify()
-
-    def get(self, timeout: float | None = None) -> BusMessage | None:
-        """The oldest message, or None after `timeout` seconds (or once closed and empty)."""
-        with self._cv:
-            if not self._q and not self._closed:
-                self._cv.wait(timeout)
-            return self._q.popleft() if self._q else None
-
-    def close(self) -> None:
-        """Wake every waiting `get`; later gets return what is left, then None."""
-        with self._cv:
-            self._closed = True
-            self._cv.notify_all()
-
-    def __len__(self) -> int:
-        return len(self._q)
-
-
-class Publisher:
-    """A declared publisher; its encoding (schema) was set at declaration."""
-
-    def __init__(self, pub: Any) -> None:
-        self._pub = pub
-        self.put = pub.put  # bound once: this is the lockstep hot path
 
 
 class Bus:

@@ -10,13 +10,7 @@ import numpy as np
 from sensorimotor.protocol import errors, limits
 from sensorimotor.protocol import messages as m
 from sensorimotor.protocol import sme_v1_pb2 as pb
-from sensorimotor.protocol.codec_tensors import (
-    MAX_TENSOR_BYTES,
-    _finite,
-    _limited,
-    _tensor_to_pb,
-    _tensors_to_pb,
-)
+from sensorimotor.protocol.codec_tensors import MAX_TENSOR_BYTES, _finite, _limited, _tensor_to_pb, _tensors_to_pb
 
 
 def _enc_spec(x: m.WorldSpec) -> pb.WorldSpec:

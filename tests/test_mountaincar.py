@@ -88,3 +88,22 @@ def test_kalman_velocity_beats_finite_differences():
     rmse_kf = np.sqrt(np.mean((est[50:] - np.array(vs)[50:]) ** 2))
     rmse_fd = np.sqrt(np.mean((fd[50:] - np.array(vs)[50:]) ** 2))
     assert rmse_kf < 0.4 * rmse_fd, (rmse_kf, rmse_fd)
+
+
+def test_kalman_velocity_matches_filterpys_filter():
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter
+
+    kf = KalmanFilter(dim_x=2, dim_z=1)
+    kf.F, kf.H = np.array([[1.0, 1.0], [0.0, 1.0]]), np.array([[1.0, 0.0]])
+    kf.R, kf.Q = np.array([[1e-4]]), Q_discrete_white_noise(2, 1.0, 1e-5)
+    kf.P, kf.x = np.diag([1e-4, 1.0]), np.array([[0.3], [0.0]])
+    f = VelocityFilter(measurement_var=1e-4)
+    f.reset(0.3)
+    for z in np.random.default_rng(0).normal(0.3, 0.05, 200):
+        kf.predict()
+        kf.update(np.array([[z]]))
+        assert f.update(z) == pytest.approx((kf.x[0, 0], kf.x[1, 0]), rel=1e-9, abs=1e-12)
+    f2 = VelocityFilter(measurement_var=1e-4)
+    f2.restore(f.state())
+    assert np.allclose(f2.state()["P"], kf.P) and f2.update(0.31) == f.update(0.31)

@@ -199,3 +199,26 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
     assert drops[0] - at["morph"] <= 5000, (drops, at)  # 4267 with this seed: about a dozen failing episodes
     relearned = run.embeddings[-1]
     assert relearned.trigger == Trigger.RELEARNED and relearned.procrustes_error < 0.01  # the new body's angles
+
+
+def test_recalled_readings_give_the_same_run_in_fewer_world_steps_and_a_wrong_one_is_forgotten():
+    """A car step whose parallel-eye view was read before reuses that reading (the greedy vergence
+    policy is fixed while driving, so the trace would repeat): the same learning curve as verging at
+    every car step, in a fraction of the world steps; a recalled reading that a check contradicts
+    forgets them all."""
+    runs = {}
+    for check in (0, 64):
+        w = MountainCarWorld(n_eval=2, seed=0, max_car_steps=100)
+        prog = MountainCarProgram(w.spec(), seed=0, eval_every=600, recall_check=check)
+        with w:
+            run, _ = drive(w, prog, lambda p: len(p.curve) >= 2)
+            runs[check] = (list(prog.curve), run.steps)
+            if check:
+                assert prog._recalls > 0.5 * prog.training_steps  # most car steps recall their reading
+                wrong = {v: p + 1.0 for v, p in prog._recall.items()}  # every remembered reading wrong
+                prog._recall = dict(wrong)
+                until = prog.training_steps + 400
+                drive(w, prog, lambda p, until=until: p.training_steps >= until)
+                assert not any(prog._recall.get(v) == p for v, p in wrong.items())  # a check differed: forgotten
+    assert runs[0][0] == runs[64][0]  # the same evaluations, step for step
+    assert runs[64][1] < 0.7 * runs[0][1], runs  # in fewer world steps (most of the rest: learning to verge)

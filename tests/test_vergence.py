@@ -74,10 +74,10 @@ def test_stereo_pair_disparities_within_2px_of_ground_truth():
     assert len(goals) == 30 and (err <= 2).mean() >= 0.95 and err.max() < 3, err  # distinct salient points only
     assert procrustes_error(gt[:, None], np.array(goals, float)[:, None]) < 0.005
     p = VergenceProgram(w.spec(), seed=0)
-    run = run_inprocess(w, p, 60000, stop_when=lambda r: len(r.embeddings) >= 8)
+    run = run_inprocess(w, p, 60000, stop_when=lambda r: len(r.embeddings) >= 3)
     assert run.embeddings[0].metrics["policy_success"] == 1.0  # perfect at the first LSPI iteration
     e = run.embeddings[-1]
-    assert e.metrics["policy_success"] == 1.0  # and again after the epsilon-greedy samples' wobble
+    assert e.metrics["policy_success"] == 1.0  # and after (one action: converge until rewarded)
     # with a perfect policy the trace lengths are the disparities of the matching minimum
     assert procrustes_error(np.array(goals, float)[:, None], e.coordinates) < 1e-12
 

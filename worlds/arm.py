@@ -11,18 +11,22 @@ increment in [-1, 1] x step per moving joint. A move that would leave the start 
 not made (the arm stays), as the object-pose box stays at its range.
 
 Observation: the camera image, grey, `image` x `image` px, float32 in [0, 1]; with
-`proprioception` also ``joints``, the moving joints' angles (rad). The camera is placed once, from
+`proprioception` (by default for 5 or more moving joints) also ``joints``, the moving joints'
+angles (rad). The camera is placed once, from
 the hand's positions over the lattice: it looks at their centre along the direction in which they
 spread least, from far enough to see them all. A small green marker rides on the hand.
 
 Start states: every pose of the lattice of `lattice` angles per moving joint, `step` apart, centred
-on the rest pose (moved inside the joint's limits where needed). Truth: the moving joints' angles
-of each start (``positions``) and the hand's 3-D position there (``hand``).
+on the rest pose (moved inside the joint's limits where needed); for 5 or more moving joints (or
+`starts` > 0) `starts` poses of that lattice drawn at random (128 by default, seeded by the world's
+seed): a 7-joint lattice has 823,543 poses. Truth: the moving joints' angles of each start
+(``positions``) and the hand's 3-D position there (``hand``).
 
 Perceptual goal: of the poses the body can reach, the one whose image shows the marker nearest the
-image centre, found from rendered colour images alone (the marker is the only green). It is found
-again after every body change that alters what is seen or reached. Reaching it (every moving joint
-within half a step of it) gives reward 1 and ends the episode.
+image centre, found from rendered colour images alone (the marker is the only green); with sampled
+starts, the start pose that shows it so. It is found again after every body change that alters what
+is seen or reached. Reaching it (every moving joint within `goal_steps` steps and a half of it: 0
+up to 4 moving joints, 1 beyond) gives reward 1 and ends the episode.
 
 Body changes (`sme perturb`): ``morph`` scales a link's length (the URDF rewritten, the body
 reloaded in place, the pose kept), ``lesion`` locks a joint where it is (starts then share its
@@ -60,9 +64,23 @@ class ArmWorldParams:
 
     urdf: str = option("kuka_iiwa/model.urdf", "the robot: a path inside pybullet_data or a URDF file of your own")
     joints: tuple[str, ...] = option((), "names of the moving joints (empty: the n_joints that move the hand most)")
-    n_joints: int = option(2, "moving joints when `joints` is empty", min=1, max=4)
+    n_joints: int = option(2, "moving joints when `joints` is empty", min=1, max=7)
     hand: str = option("", "the hand link the marker rides on (empty: the end of the chain)")
     lattice: int = option(7, "start angles per moving joint (the start states: lattice^joints poses)", min=2, max=15)
+    starts: int = option(
+        0,
+        "start poses drawn from the lattice (seeded by the world's seed); 0: the whole lattice up to 4 moving "
+        "joints, 128 drawn beyond",
+        min=0,
+        max=4096,
+    )
+    goal_steps: int | None = option(
+        None,
+        "the goal is reached with every moving joint within this many steps (and a half) of the goal pose; "
+        "none: 0 up to 4 moving joints, 1 beyond (a single pose of a 7-joint lattice is too rare to be found)",
+        min=0,
+        max=3,
+    )
     bend: float = option(
         0.4, "the moving joints' angle at the lattice's centre, rad (nearest limit if outside)", min=-3.2, max=3.2
     )
@@ -71,7 +89,9 @@ class ArmWorldParams:
     goal_image: int = option(96, "image side, px, the perceptual goal is found on", min=32, max=256)
     fov: float = option(50.0, "camera field of view, degrees", min=10.0, max=120.0)
     marker: float = option(0.04, "marker radius, m", min=0.005, max=0.5)
-    proprioception: bool = option(False, "also serve the moving joints' angles as sensor `joints`")
+    proprioception: bool | None = option(
+        None, "also serve the moving joints' angles as sensor `joints` (none: for 5 or more moving joints)"
+    )
     actions: str = option(
         "discrete", "discrete (+-step per joint) or box (an increment per joint)", choices=("discrete", "box")
     )
@@ -316,9 +336,17 @@ class ArmWorld(World):
                 )
             start = self.rest[i] - span / 2
             start = min(max(start, lo), hi - span)
-            self._grid.append(start + prm.step * np.arange(prm.lattice))
-        mesh = np.meshgrid(*self._grid, indexing="ij")
-        self.poses = np.stack([m.reshape(-1) for m in mesh], axis=1)  # [lattice^n, n]
+            self._grid.append(np.round(start + prm.step * np.arange(prm.lattice), 9) + 0.0)
+        self.proprioception = prm.proprioception if prm.proprioception is not None else n > 4
+        self.goal_steps = prm.goal_steps if prm.goal_steps is not None else (1 if n > 4 else 0)
+        lattice_size = prm.lattice**n
+        self.sampled = (prm.starts > 0 or n > 4) and (prm.starts or 128) < lattice_size
+        if self.sampled:
+            self.poses = self._sample_poses(prm.starts or 128)
+        else:
+            mesh = np.meshgrid(*self._grid, indexing="ij")
+            self.poses = np.stack([m.reshape(-1) for m in mesh], axis=1)  # [lattice^n, n]
+        self._centre = np.array([g[len(g) // 2] for g in self._grid])  # the lattice's centre pose
         self._lo = np.array([g[0] for g in self._grid]) - 1e-9
         self._hi = np.array([g[-1] for g in self._grid]) + 1e-9
         self.max_episode_steps = prm.max_episode_steps or 4 * n * (prm.lattice - 1)
@@ -335,6 +363,19 @@ class ArmWorld(World):
         self.marker_colour = self._pick_colour()
         vis = self._c.createVisualShape(p.GEOM_SPHERE, radius=prm.marker, rgbaColor=[*self.marker_colour, 1.0])
         self._marker = self._c.createMultiBody(0, baseVisualShapeIndex=vis)
+
+    def _sample_poses(self, k: int) -> np.ndarray:
+        """`k` distinct lattice poses drawn at random (seeded by the world's seed, in draw order)."""
+        rng = np.random.default_rng([self.seed, 36])
+        n, m = len(self._grid), self.params.lattice
+        picked: dict[tuple[int, ...], None] = {}
+        while len(picked) < k:
+            for row in rng.integers(0, m, (k, n)):
+                picked.setdefault(tuple(int(v) for v in row), None)
+                if len(picked) == k:
+                    break
+        idx = np.array(list(picked))
+        return np.stack([self._grid[j][idx[:, j]] for j in range(n)], axis=1)
 
     def _hand_link(self, info: list[Any], movable: list[int]) -> int:
         if self.params.hand:
@@ -386,7 +427,7 @@ class ArmWorld(World):
     def _place_camera(self) -> None:
         prm = self.params
         hands = np.array([self.tip_position(q) for q in self.poses])
-        centre = self.tip_position(self.poses[len(self.poses) // 2])  # the lattice's centre pose
+        centre = self.tip_position(self._centre if self.sampled else self.poses[len(self.poses) // 2])
         _, _, vt = np.linalg.svd(hands - hands.mean(axis=0), full_matrices=True)
         axis = vt[-1] if len(hands) > 2 else np.array([1.0, 0.0, 0.0])
         if abs(axis[2]) > 0.9:  # looking down: keep the view's up axis horizontal
@@ -405,7 +446,10 @@ class ArmWorld(World):
 
     def _pick_colour(self) -> tuple[float, float, float]:
         """The first marker colour that the robot alone shows nowhere (corners and centre of the lattice)."""
-        corners = [self.poses[0], self.poses[-1], self.poses[len(self.poses) // 2]]
+        if self.sampled:
+            corners = [np.array([g[0] for g in self._grid]), np.array([g[-1] for g in self._grid]), self._centre]
+        else:
+            corners = [self.poses[0], self.poses[-1], self.poses[len(self.poses) // 2]]
         views = [self.render(q, self.params.goal_image) for q in corners]
         for colour in MARKER_COLOURS:
             if not any(colour_mask(v, colour).any() for v in views):
@@ -479,8 +523,8 @@ class ArmWorld(World):
         return self._goal
 
     def at_goal(self, angles: np.ndarray) -> bool:
-        """Every moving joint within half a (current) step of the goal pose."""
-        tol = self.params.step * np.maximum(self.gain, 1.0) / 2 + 1e-9
+        """Every moving joint within `goal_steps` steps and a half (current steps) of the goal pose."""
+        tol = self.params.step * np.maximum(self.gain, 1.0) * (self.goal_steps + 0.5) + 1e-9
         return bool(np.all(np.abs(angles - self.goal) <= tol))
 
     # World interface -----------------------------------------------------------------------------
@@ -489,7 +533,7 @@ class ArmWorld(World):
         prm = self.params
         n = len(self.moving)
         sensors = [SensorSpec("camera", "float32", (prm.image, prm.image), 0, 1, "grey camera image of the arm")]
-        if prm.proprioception:
+        if self.proprioception:
             lo = float(min(g[0] for g in self._grid))
             hi = float(max(g[-1] for g in self._grid))
             sensors.append(SensorSpec("joints", "float32", (n,), lo, hi, "the moving joints' angles, rad"))
@@ -514,6 +558,8 @@ class ArmWorld(World):
                 "step_rad": repr(self.params.step),
                 "max_episode_steps": str(self.max_episode_steps),
                 "truth_dims": str(n),
+                "starts": "sampled" if self.sampled else "lattice",
+                "goal_steps": str(self.goal_steps),
             },
             goal="reward",
         )
@@ -522,7 +568,7 @@ class ArmWorld(World):
         img = self.observe(self.angles)
         self._frame = (img * 255).astype(np.uint8)
         tensors = {"camera": img}
-        if self.params.proprioception:
+        if self.proprioception:
             tensors["joints"] = self.angles.astype(np.float32)
         return StepResult(tensors, reward, done, truncated=truncated)
 
@@ -551,7 +597,7 @@ class ArmWorld(World):
         delta *= self.params.step * self.sign * self.gain
         for k in self.locked:
             delta[k] = 0.0
-        nxt = self.angles + delta
+        nxt = np.round(self.angles + delta, 9) + 0.0  # on the lattice: no drift in the low bits, no -0.0
         if np.all(nxt >= self._lo) and np.all(nxt <= self._hi):
             self.angles = nxt
         self.t += 1

@@ -14,6 +14,10 @@ class EmbeddableEnv(gym.Wrapper):
     """The hook that makes any environment embeddable, as a wrapper: its start states, how to reset
     to one, and their truth (and, optionally, how its goal is recognised).
 
+    An environment can offer the same by itself, with methods ``sme_start_states()``,
+    ``sme_reset_to(start)``, ``sme_truth()``, ``sme_perturb(kind, params)`` and attributes
+    ``sme_goal`` and ``sme_perturbations``, on any wrapper layer.
+
     Parameters
     ----------
     env : gymnasium.Env
@@ -33,10 +37,6 @@ class EmbeddableEnv(gym.Wrapper):
     perturbations : mapping or None, default=None
         The kinds `perturb` offers: kind -> parameter dataclass (`params` is then its parsed
         instance) or a one-line description (`params` is then a dict of strings).
-
-    An environment can offer the same by itself, with methods ``sme_start_states()``,
-    ``sme_reset_to(start)``, ``sme_truth()``, ``sme_perturb(kind, params)`` and attributes
-    ``sme_goal`` and ``sme_perturbations``, on any wrapper layer.
 
     Examples
     --------

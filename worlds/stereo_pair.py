@@ -2,13 +2,20 @@
 ships with its ground-truth disparity (no download).
 
 Two foveal windows look at the same row: the left one rests on a salient point, the right one
-starts at the same column (disparity 0) and moves one pixel per converge action (diverge moves it
-back). The perceptual goal is the shift where the foveated difference (Eq 7.2) is minimal over the
+starts at the same column (disparity 0) and moves one pixel per converge action. As in the
+dissertation ("the agent can perform a single action, convergence by one pixel"), converge is the
+only action by default; `diverge=true` adds the action that moves it back (then the policy must be
+learned, and LSPI over the foveal difference alone does not always learn it: ch. 7 in
+docs/reproduce.md). The perceptual goal is the shift where the foveated difference (Eq 7.2) is minimal over the
 scan range; reaching it gives reward 1. The trace length is then the disparity. Start states are
 salient points: local maxima of the gradient energy of the blurred left image (a bottom-up
 saliency map), spread apart, with valid ground truth, whose best match along the row is distinct
 (its difference below `uniqueness` times the best one more than 3 px away: an image-only stereo
-confidence that repeated texture and occlusions fail). Truth: the dataset's disparity there.
+confidence that repeated texture and occlusions fail). Truth: the dataset's disparity there - the
+Middlebury 2014 ground truth (structured light, subpixel; Scharstein et al., GCPR 2014) that
+scikit-image ships down-sampled by 4 with the images (0 to 59.9 px; NaN, 7 % of pixels, where the
+dataset has none: start points are taken only where it is finite). The swept range, 0 to
+`max_shift` = 80 px, covers every disparity in the map.
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ class StereoPairParams:
     radius: int = option(10, "fovea half-width, px (the fovea is 2 radius + 1 px wide)", min=1)
     max_shift: int = option(80, "largest right-fovea shift (disparity) scanned, px", min=1)
     uniqueness: float = option(0.7, "keep a point if its best match beats every other by this factor", min=0.0, max=1.0)
+    diverge: bool = option(False, "offer a diverge action besides converge (the dissertation's agent only converges)")
 
 
 class StereoPairWorld(World):
@@ -83,6 +91,7 @@ class StereoPairWorld(World):
         self.left = left.mean(axis=2).astype(np.float32) / 255.0
         self.right = right.mean(axis=2).astype(np.float32) / 255.0
         self.disparity = disp
+        self.diverge = prm.diverge
         self.radius, self.max_shift = radius, max_shift
         self.max_episode_steps = max_shift + 20
         self.row = self.col = 0
@@ -112,7 +121,7 @@ class StereoPairWorld(World):
         )
 
     def spec(self) -> WorldSpec:
-        """Two float32 foveae ``left`` and ``right``; actions converge (0) and diverge (1)."""
+        """Two float32 foveae ``left`` and ``right``; actions converge (0) and, with `diverge`, diverge (1)."""
         f = (2 * self.radius + 1,) * 2
         return WorldSpec(
             self.world_id,
@@ -121,7 +130,7 @@ class StereoPairWorld(World):
                 SensorSpec("left", "float32", f, 0, 1, "left fovea"),
                 SensorSpec("right", "float32", f, 0, 1, "right fovea"),
             ),
-            ActionSpace(n=2, names=("converge", "diverge")),
+            ActionSpace(n=2, names=("converge", "diverge")) if self.diverge else ActionSpace(n=1, names=("converge",)),
             0.0,
             1.0,
             "vergence",
@@ -145,6 +154,8 @@ class StereoPairWorld(World):
 
     def step(self, action: np.ndarray) -> StepResult:
         """Shift the right window one pixel; reward 1 and done on reaching the perceptual goal."""
+        if not self.diverge and int(np.asarray(action).reshape(-1)[0]) != 0:
+            raise ValueError(f"this stereo pair has one action, 0 (converge); got {action} (diverge=true offers 1)")
         self.k = verge(self.k, action, self.max_shift)
         self.t += 1
         if self.k == self.goal:

@@ -20,6 +20,10 @@ ENTRY_POINT_GROUP = "sensorimotor.learners"
 #: the table learners of this package: name -> "module:Class"
 TABLE_LEARNERS = {"model": "sensorimotor.agent.learners.tabular_model:TabularModel"}
 
+#: the learners of this package over a continuous state vector, driven by the generic program itself
+#: (`generic.learner=NAME`): name -> "module:Class"
+STATE_LEARNERS = {"reach": "sensorimotor.agent.learners.reach:ReachLearner"}
+
 
 def outside_learners() -> list[str]:
     """The names installed packages declare in the entry-point group."""
@@ -52,4 +56,4 @@ def table_learner_class(name: str) -> type[TableLearner] | None:
     return klass
 
 
-__all__ = ["ENTRY_POINT_GROUP", "TABLE_LEARNERS", "outside_learners", "table_learner_class"]
+__all__ = ["ENTRY_POINT_GROUP", "STATE_LEARNERS", "TABLE_LEARNERS", "outside_learners", "table_learner_class"]

@@ -21,6 +21,11 @@ The learner follows the observation (`learner=auto`; the attach event says which
 * ``sarsa`` - a continuous observation of at most `sarsa_max_dims` values: tile-coded Sarsa(lambda)
   with optimistic initial values (the classic mountain-car recipe, ch. 8's CMAC; hashed tiles above
   `memory`), which explores toward sparse goals by itself.
+* ``reach`` - an action of 5 or more dimensions (a box's, or a discrete space's pairs of +-moves: an
+  arm commanded in 6 or 7 joints) and a sensor of at most 16 continuous values (its joint angles):
+  each action's mean move of that vector, the goal states met, and steps toward their medoid, the
+  joints moved one after another (`agent.learners.reach`); the other sensors are not read. Box
+  actions of more than 4 dimensions are coded per axis (2 per dimension), not as a product.
 * ``planner`` - a continuous observation of at most `planner_max_dims` values and a box action of
   two or more dimensions (whose discretised table is a product of moves: 27 for three): a model of
   each action's effect, linear in the action and fitted per node of a grid over the observation,
@@ -136,6 +141,8 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
             basis = self._init_sarsa(d)
         elif choice.learner == "planner":
             basis, d = self._init_planner(d)
+        elif choice.learner == "reach":  # many action dimensions, a short state vector
+            basis, d = self._init_reach()
         else:
             basis = self._init_lspi(d)
         declared = spec.params.get("max_episode_steps", "")
@@ -171,8 +178,11 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
             "sarsa": f"tile-coded Sarsa(lambda), {self.sarsa.coder.dims if self.sarsa else 0} values"
             + (", hashed tiles" if self.sarsa and self.sarsa.coder.hashed else ""),
             "lspi": "LSPI over PCA + RBF features",
+            "reach": "a learned move per action over the sensors "
+            + ", ".join(self._reach_sensors)
+            + ", steps toward the goal states met",
             "planner": f"a learned local-linear model and interpolated value iteration, "
-            f"{self.planner.grid if self.planner else 0}^{self.planner.dims if self.planner else 0} nodes"
+            f"{getattr(self.planner, 'grid', 0)}^{self.planner.dims if self.planner else 0} nodes"
             + (", over motor coordinates of the frames" if self.motor else ""),
         }.get(
             self.learner,
@@ -231,7 +241,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         self._accepted, self._best, self._checking = None, None, False
         self._best_disparity = None
         self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
-        self._relearn_unconfirmed = 0
+        self._relearn_unconfirmed, self._chance_seen = 0, False
         self._accepted_basis, self._sweep_rbf = None, None
         self._transitions.clear()
         self._rotations = None

@@ -21,6 +21,7 @@ from sensorimotor.agent.learners.lspi import LSPI
 from sensorimotor.agent.learners.lspi_features import RBFFeatures, set_basis
 from sensorimotor.agent.learners.model_planner import ModelPlanner
 from sensorimotor.agent.learners.motor_map import MotorMap
+from sensorimotor.agent.learners.reach import ReachLearner
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda
 from sensorimotor.agent.programs.base import Decision, EventOutput, Program
 from sensorimotor.agent.programs.generic_params import GenericProgramParams
@@ -55,7 +56,8 @@ class GenericBase(Program):
     lspi: LSPI
     model: TableLearner | None
     sarsa: SarsaLambda | None
-    planner: ModelPlanner | None
+    planner: ModelPlanner | ReachLearner | None
+    _reach_sensors: tuple[str, ...] = ()  # reach: the short vectors it plans over (the other sensors unread)
     _tie_tolerance: float
     # observations -> states
     low: int
@@ -125,6 +127,7 @@ class GenericBase(Program):
     _pending_embedding: dict[str, Any] | None
     _last_choice: int
     retried_total: int
+    _chance_seen: bool  # outcomes alternated while watched: the accepted policy is checked first
 
     @property
     def stochastic(self) -> bool:
@@ -166,6 +169,8 @@ class GenericBase(Program):
     def _flat(self, obs: Observation) -> np.ndarray:
         parts = []
         for s in self.spec.sensors:
+            if self._reach_sensors and s.name not in self._reach_sensors:
+                continue
             a = obs.tensors.get(s.name)
             if a is None:
                 raise SpecMismatch(f"observation step {obs.step} has no tensor {s.name!r}")
@@ -272,16 +277,28 @@ class GenericBase(Program):
             return
         if nxt == other:
             return
+        self._transitions.clear()
+        if self._watching and self._accepted is not None:
+            # outcomes alternate in a world watched as deterministic: its body changed (an action
+            # that acts late, a lesion that makes states look alike), or distinct states looked alike
+            # all along. The accepted policy is swept once more, scored as before (`_swept`): a
+            # changed body misses goals it reached, which the detector sees as a drop; an unchanged
+            # one reaches them all, and the world is taken as stochastic from there
+            self._chance_seen = True
+            return
+        self._become_stochastic(obs.step)
+
+    def _become_stochastic(self, step: int) -> None:
+        """Traces are sampled from here (`samples` per start), and the learner plans for chance."""
         self.stochastic = True
         self._transitions.clear()
         self._plan_for_chance()
-
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
                 f"the world is stochastic (one observation and action led to different observations): "
                 f"{self.samples} traces per start state, {self.estimator} estimator",
-                obs.step,
+                step,
                 reason="stochastic",
             )
         )

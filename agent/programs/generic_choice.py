@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sensorimotor.agent.learners.base import TableLearner
+from sensorimotor.agent.learners.reach import fits as reach_fits
 from sensorimotor.agent.learners.registry import outside_learners, table_learner_class
 from sensorimotor.agent.programs.generic_params import LEARNERS, OWN_LEARNERS, GenericProgramParams
 from sensorimotor.protocol.errors import SpecMismatch
@@ -48,6 +49,8 @@ def choose_learner(spec: WorldSpec, prm: GenericProgramParams) -> LearnerChoice:
         learner = (
             "model"
             if ids or symbols
+            else "reach"
+            if reach_fits(spec)
             else "planner"
             if box and (d <= prm.planner_max_dims or frames)
             else "sarsa"

@@ -11,11 +11,14 @@ import numpy as np
 from sensorimotor.agent.learners.lspi import TabularBasis
 from sensorimotor.agent.learners.model_planner import ModelPlanner, plan_job
 from sensorimotor.agent.learners.motor_map import MotorMap
+from sensorimotor.agent.learners.reach import ReachLearner, state_sensors
+from sensorimotor.agent.learners.reach import plan_job as reach_plan_job
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision
 from sensorimotor.agent.programs.generic_base import GenericBase
 from sensorimotor.agent.programs.generic_jobs import motor_job
 from sensorimotor.agent.programs.goal import failed, reached
+from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import Observation
 
 
@@ -61,6 +64,26 @@ class GenericContinuous(GenericBase):
             effort=prm.planner_effort,
             seed=int(self.rng.integers(2**31)),
         )
+        self._seen_lo, self._seen_hi, self._warm = np.full(d, np.inf), np.full(d, -np.inf), 0
+        return TabularBasis(1, self.n_actions), d  # the basis is unused: LSPI keeps the program's shape uniform
+
+    def _init_reach(self) -> tuple[TabularBasis, int]:
+        """The reach learner (`agent.learners.reach`) over the world's short continuous vectors (an
+        arm's joint angles) alone; returns the basis and the values it plans over."""
+        self.n_states = 0
+        self._reach_sensors = tuple(state_sensors(self.spec))
+        if not self._reach_sensors:
+            raise SpecMismatch(
+                f"generic program: learner reach needs a sensor of at most 16 continuous values; world "
+                f"{self.spec.world_id} has {', '.join(s.name for s in self.spec.sensors)}"
+            )
+        chosen = [s for s in self.spec.sensors if s.name in self._reach_sensors]
+        lo = np.concatenate([np.full(int(np.prod(s.shape)), s.low, float) for s in chosen])
+        hi = np.concatenate([np.full(int(np.prod(s.shape)), s.high, float) for s in chosen])
+        d = lo.size
+        self._lo, self._span = lo, np.where(hi > lo, hi - lo, 1.0)
+        self._raw_lo, self._raw_span = self._lo, self._span
+        self.planner = ReachLearner(d, self.n_actions, seed=int(self.rng.integers(2**31)))
         self._seen_lo, self._seen_hi, self._warm = np.full(d, np.inf), np.full(d, -np.inf), 0
         return TabularBasis(1, self.n_actions), d  # the basis is unused: LSPI keeps the program's shape uniform
 
@@ -207,7 +230,8 @@ class GenericContinuous(GenericBase):
             if due and not self.background.pending("plan"):
                 self._fresh = False
                 self._since_plan = 0
-                self.background.submit("plan", plan_job, **self.planner.job_args())
+                job = reach_plan_job if isinstance(self.planner, ReachLearner) else plan_job
+                self.background.submit("plan", job, **self.planner.job_args())
         self._prev_x, self._prev = (x, (0, a)) if a is not None else (None, None)
 
     def _learn_planner(self, obs: Observation) -> Decision:

@@ -13,18 +13,34 @@ from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
 from sensorimotor.agent.embedding.rotation_frames import Rotations, frame_trace
 from sensorimotor.agent.learners.motor_map import fit_motor_map
-from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import WorldSpec
+
+#: box actions of more dimensions than this are coded per axis (`axis_moves`), not as a product
+PRODUCT_MAX_DIMS = 4
+
+
+def axis_moves(low: tuple[float, ...], high: tuple[float, ...], scale: float) -> np.ndarray:
+    """Two moves per axis (+ then -, in axis order), each `scale` of the way from the box's middle to
+    one bound with every other axis at its middle: 2 x dims rows, where a product of 3 values per
+    axis would grow as 3^dims (2,187 rows for 7 joints)."""
+    lo, hi = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+    mid = (lo + hi) / 2
+    rows = np.repeat(mid[None, :], 2 * len(lo), axis=0)
+    for k in range(len(lo)):
+        rows[2 * k, k] = mid[k] + scale * (hi[k] - mid[k])
+        rows[2 * k + 1, k] = mid[k] - scale * (mid[k] - lo[k])
+    return rows
 
 
 def action_table(spec: WorldSpec, levels: int, scale: float = 1.0) -> np.ndarray:
     """The action values the program chooses among: (n_actions, dims); box values span `scale`
-    of each bound about the box's middle."""
+    of each bound about the box's middle: every combination of `levels` values per axis up to
+    `PRODUCT_MAX_DIMS` axes, one move per axis and direction beyond (`axis_moves`)."""
     a = spec.action_space
     if a.discrete:
         return np.arange(a.n, dtype=np.float64)[:, None]
-    if len(a.low) > 4:
-        raise SpecMismatch(f"generic program: {len(a.low)} action dimensions; at most 4 are discretised")
+    if len(a.low) > PRODUCT_MAX_DIMS:
+        return axis_moves(a.low, a.high, scale)
     grids = [
         (lo + hi) / 2 + scale * (np.linspace(lo, hi, levels) - (lo + hi) / 2)
         for lo, hi in zip(a.low, a.high, strict=True)
@@ -121,4 +137,4 @@ def motor_job(
     }
 
 
-__all__ = ["MODE_SHARE", "action_table", "embed_job", "mode_share", "motor_job"]
+__all__ = ["MODE_SHARE", "PRODUCT_MAX_DIMS", "action_table", "axis_moves", "embed_job", "mode_share", "motor_job"]

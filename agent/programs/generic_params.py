@@ -8,8 +8,8 @@ from dataclasses import dataclass
 from sensorimotor.protocol.params import option
 
 #: the learners the program drives itself; any table learner of `agent.learners.registry` too
-LEARNERS = ("auto", "model", "tabular", "lspi", "sarsa", "planner")
-OWN_LEARNERS = ("tabular", "lspi", "sarsa", "planner")
+LEARNERS = ("auto", "model", "tabular", "lspi", "sarsa", "planner", "reach")
+OWN_LEARNERS = ("tabular", "lspi", "sarsa", "planner", "reach")
 
 
 @dataclass(frozen=True)
@@ -19,7 +19,8 @@ class GenericProgramParams:
     learner: str = option(
         "auto",
         "auto (by the observation: see the module docstring), model (a counted model of a table, planned on), "
-        "tabular (LSPI over a table), lspi, sarsa or planner, or the name of a table learner an installed "
+        "tabular (LSPI over a table), lspi, sarsa, planner or reach (many action dimensions and a short state vector: "
+        "agent.learners.reach), or the name of a table learner an installed "
         "package declares (entry-point group sensorimotor.learners)",
     )
     samples_per_iteration: int = option(500, "tabular/lspi: new random-action samples between policy iterations", min=1)

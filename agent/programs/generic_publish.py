@@ -55,7 +55,7 @@ class GenericPublish(GenericBase):
             embed_job,
             traces=per_start,
             reached=[list(flags[i * k : (i + 1) * k]) for i in range(n)],
-            actions=None if self.discrete else self.actions.copy(),
+            actions=None if self.discrete or self.learner == "reach" else self.actions.copy(),
             dims=self.dims,
             estimator=self.estimator,
             distance=prm.distance,

@@ -34,6 +34,7 @@ class GenericState(GenericBase):
             "fitted_at": self._fitted_at,
             "said_no_starts": self._said_no_starts,
             "retried_total": self.retried_total,
+            "chance_seen": self._chance_seen,
             "watching": self._watching,
             "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
             # (observation, previous action) pairs met on the trace in progress: its cycle check
@@ -105,6 +106,7 @@ class GenericState(GenericBase):
         self._fitted_at = int(state["fitted_at"])
         self._said_no_starts = bool(state["said_no_starts"])
         self.retried_total = int(state.get("retried_total", 0))  # absent in older checkpoints
+        self._chance_seen = bool(state.get("chance_seen", False))
         self._watching = bool(state["watching"])
         pending = state.get("pending_embedding")
         self._pending_embedding = None if pending is None else dict(pending)

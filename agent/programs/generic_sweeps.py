@@ -69,6 +69,7 @@ class GenericSweeps(GenericBase):
         self._ends = {}  # planner: each start's (start, end) this sweep
         self._pending_embedding = None  # what the embed job in flight is of
         self._last_choice = 0  # the action table's row the last sweep step sent
+        self._chance_seen = False
         self.retried_total = 0  # traces run once more before they counted (`_in_doubt`), every sweep
 
     def _choose(self, obs: Observation, trace: list[int]) -> int:
@@ -93,6 +94,7 @@ class GenericSweeps(GenericBase):
 
     def _start_sweep(self, check: bool) -> Decision:
         """Sweep the start states with the newest policy, or (`check`) with the accepted one."""
+        check = check or self._chance_seen
         self._prev, self._prev_x, self._prev_key = None, None, None
         self.phase = "embed"
         self._checking = check
@@ -186,6 +188,16 @@ class GenericSweeps(GenericBase):
         sw = self._sweep
         k = sw.repeats
         self.retried_total += sw.retries
+        if self._chance_seen and self._checking and not self.stochastic:
+            reached_before = self._accepted_reached or []
+            if not any(bool(a) and not r for a, r in zip(reached_before, sw.reached, strict=False)):
+                # the accepted policy reaches every goal it reached: the body is as it was, and the
+                # outcomes that alternated are chance (or states that look alike)
+                self._chance_seen, self._checking, self.phase = False, False, "explore"
+                self._become_stochastic(step)
+                return None
+            # it misses some: their zeros reach the detector, and the accepted policy is checked at
+            # every sweep until the drop
         if self.stochastic and k > 1 and all(sw.traces[i] == sw.traces[i - i % k] for i in range(len(sw.traces))):
             # every start's samples were the same trace: the policy controls whatever made the
             # transitions differ (or distinct states looked alike), so one trace per start will do
@@ -243,8 +255,9 @@ class GenericSweeps(GenericBase):
         # scores held back as their traces ended (see `_sweep_act`) are fed when they are absolute
         # (a stochastic world, or nothing accepted yet), never when relative to the accepted traces
         absolute = self.stochastic or self._accepted_reached is None
+        exact = self._exact_plan()
         if self._watching and not self._checking and better and not same and self.tabular and not self.stochastic:
-            if traces != self._candidate_traces:
+            if traces != self._candidate_traces and not exact:
                 # a better policy, seen once: published when the next policy iteration keeps its
                 # traces - a policy still changing from one iteration to the next has not converged,
                 # and the maps of its passing detours can be far worse than the accepted one
@@ -258,6 +271,7 @@ class GenericSweeps(GenericBase):
             and not self.stochastic
             and traces != self._candidate_traces
             and self._relearn_unconfirmed < self.RELEARN_CONFIRM
+            and not exact
         ):
             # relearning after a body change: the first policies that reach the goal again still
             # change from one iteration to the next, and the map of their detours can be far off
@@ -294,6 +308,13 @@ class GenericSweeps(GenericBase):
         self._embed(step, relearned, k)
         self._checking = False
         return None
+
+    def _exact_plan(self) -> bool:
+        """Whether the swept policy is the exact shortest way: the model learner's plan over a
+        complete model of a deterministic world. Such a policy needs no second sweep to show it has
+        converged (the confirmations above are for learners whose policy changes between iterations),
+        so a relearned map is published at its first good sweep."""
+        return self.model is not None and not self.stochastic and self.model.complete()
 
     def _hold(self, step: int) -> None:
         """A newer policy was not better beyond the noise (stochastic world): one more round the

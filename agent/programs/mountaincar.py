@@ -48,6 +48,7 @@ from sensorimotor.protocol.messages import EventKind, Observation, Trigger, Worl
 from sensorimotor.protocol.params import option, parse
 
 CONVERGE, DIVERGE, REVERSE = 0, 1, 2
+RECALL_SIZE = 100_000  # remembered readings at most (a world whose views never repeat adds no more)
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,12 @@ class MountainCarProgramParams:
     process_var: float = option(1e-5, "process variance of the velocity Kalman filter", min=0.0)
     policy_map: int = option(
         0, "clusters of a policy map of the drive traces emitted after each evaluation (0: none; ch. 9.6)", min=0
+    )
+    recall_check: int = option(
+        64,
+        "a car step whose parallel-eye view was read before reuses that reading; every Nth reuse is "
+        "verged again, and a differing reading forgets them all (0: verge at every car step)",
+        min=0,
     )
 
 
@@ -141,6 +148,12 @@ class MountainCarProgram(Program):
         self._coords0: np.ndarray | None = None
         self._positions: dict[tuple[int, ...], float] = {}
         self._verge: dict[float, int] = {}  # the greedy vergence action per foveal difference, while LSPI is fixed
+        # the position each parallel-eye view led to, while LSPI and the embedding are fixed: the view
+        # depends only on where the car is, and the greedy trace from it only on the views it meets
+        self._recall: dict[bytes, float] = {}
+        self._recalls = 0  # reuses so far (every recall_check-th is verged again to check)
+        self._view: bytes | None = None  # the parallel-eye view of the reading in progress
+        self._checking: float | None = None  # the recalled position that reading is checking
         self.quantum = 1.0
         # driving
         self.training_steps = 0
@@ -206,6 +219,7 @@ class MountainCarProgram(Program):
             self.quantum = span / max(max(lengths) - min(lengths), 1)  # one vergence step, in coordinates
             self._make_driver(float(coords.min()), float(coords.max()))
         self.landmarks, self._model, self._positions, self._verge = traces, mds.model, {}, {}
+        self._forget()
         n = len(traces)
         self.emit(
             EmbeddingOutput(
@@ -263,6 +277,39 @@ class MountainCarProgram(Program):
     def _start_training_episode(self) -> None:
         self._trace, self._last_drive, self._s, self._ep_steps, self._watching = None, False, None, 0, False
 
+    def _forget(self) -> None:
+        """Drop every remembered reading (the vergence policy, the embedding or the body changed)."""
+        self._recall, self._view, self._checking = {}, None, None
+
+    def _recalled(self, obs: Observation) -> float | None:
+        """At the parallel-eye view that begins a reading: the position this view led to before,
+        unless this reuse is one that is verged again to check it (or recall is off)."""
+        n = self.params.recall_check
+        self._view, self._checking = None, None
+        if not n:
+            return None
+        view = obs.tensors["left"].tobytes() + obs.tensors["right"].tobytes()
+        p = self._recall.get(view)
+        self._view = view
+        if p is None:
+            return None
+        self._recalls += 1
+        if self._recalls % n:
+            return p
+        self._checking = p
+        return None
+
+    def _remember(self, p: float) -> None:
+        """Keep the position the reading just finished gave for its first view; a check that
+        differs forgets every remembered reading (something changed that the views do not show)."""
+        if self._view is None:
+            return
+        if self._checking is not None and self._checking != p:
+            self._forget()
+        elif len(self._recall) < RECALL_SIZE:
+            self._recall[self._view] = p
+        self._view, self._checking = None, None
+
     def _drive(self, obs: Observation) -> Decision:
         if obs.t == 0:
             self._trace, self._s, self._ep_steps, self._last_drive = [], None, 0, False
@@ -274,6 +321,11 @@ class MountainCarProgram(Program):
         if self._trace is None:
             self._trace = []
         if not (obs.reward > 0 and self._trace) and len(self._trace) < self.max_trace and not (obs.t > 0 and obs.done):
+            if not self._trace:
+                p = self._recalled(obs)
+                if p is not None:
+                    self._trace = None
+                    return self._car_step(p)
             d = foveal_difference(obs)
             a = self._verge.get(d)
             if a is None:
@@ -281,15 +333,27 @@ class MountainCarProgram(Program):
             self._trace.append(a)
             return Decision((float(a),))
         if obs.done:  # the world ended the episode while we were reading (its car-step limit)
+            self._view = self._checking = None
             return self._episode_over(obs)
         p = self.position(self._trace)
+        self._remember(p)
         self._trace = None
-        sarsa, kf = self.sarsa, self._kf
-        assert sarsa is not None and kf is not None, "the driver is made with the first embedding"
-        if self._s is None:
+        return self._car_step(p)
+
+    def _car_state(self, p: float, first: bool) -> np.ndarray:
+        """The state Sarsa drives on: the filtered position and its velocity (Kalman filter)."""
+        kf = self._kf
+        assert kf is not None, "the driver is made with the first embedding"
+        if first:
             kf.reset(p)
         pos, vel = kf.update(p)
-        s = np.array([pos, vel])
+        return np.array([pos, vel])
+
+    def _car_step(self, p: float) -> Decision:
+        """One car step from position `p`: Sarsa(lambda) picks (and, training, learns) the drive."""
+        sarsa = self.sarsa
+        assert sarsa is not None, "the driver is made with the first embedding"
+        s = self._car_state(p, self._s is None)
         if self.evaluating:
             a = sarsa.greedy(s)
             self._eval_trace.append(a)
@@ -391,6 +455,7 @@ class MountainCarProgram(Program):
         self.relearn_at = step
         self.lspi.reset()
         self._verge = {}
+        self._forget()
         self.practice.reset()
         self.phase, self._explore_len = "explore", 0
         self.emit(EventOutput(EventKind.RELEARNING, "vergence policy relearned from scratch, then re-embedded", step))
@@ -453,6 +518,14 @@ class MountainCarProgram(Program):
             "curve": [list(c) for c in self.curve],
             "episode_log": [list(e) for e in self.episode_log],
             "relearn_at": self.relearn_at,
+            # the remembered readings, so a restored program recalls (and checks) as this one would
+            "recall_views": np.array([np.frombuffer(v, dtype=np.uint8) for v in self._recall], dtype=np.uint8)
+            if self._recall
+            else None,
+            "recall_positions": [float(p) for p in self._recall.values()],
+            "recalls": self._recalls,
+            "view": None if self._view is None else np.frombuffer(self._view, dtype=np.uint8).copy(),
+            "checking": self._checking,
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -475,6 +548,7 @@ class MountainCarProgram(Program):
         self._coords0 = array_or_none(state["coords0"])
         self._positions = {tuple(int(a) for a in k): float(v) for k, v in state["positions"]}
         self._verge = {float(d): int(a) for d, a in state["verge"]}
+        self._forget()
         self.quantum = float(state["quantum"])
         self.training_steps, self.episodes = int(state["training_steps"]), int(state["episodes"])
         driver = state["driver"]
@@ -504,9 +578,23 @@ class MountainCarProgram(Program):
         self.curve = [(int(n), float(m)) for n, m in state["curve"]]
         self.episode_log = [(int(n), int(k)) for n, k in state["episode_log"]]
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
+        views = state.get("recall_views")
+        self._recall = (
+            {}
+            if views is None
+            else {
+                np.asarray(v, dtype=np.uint8).tobytes(): float(p)
+                for v, p in zip(views, state["recall_positions"], strict=True)
+            }
+        )
+        self._recalls = int(state.get("recalls", 0))
+        view = state.get("view")
+        self._view = None if view is None else np.asarray(view, dtype=np.uint8).tobytes()
+        self._checking = None if state.get("checking") is None else float(state["checking"])
 
     def world_restarted(self) -> None:
         """Drop the pending vergence sample and restart the trace and episode in progress."""
         self.practice.reset()
         self._sweep.interrupted()
+        self._view = self._checking = None
         self._start_training_episode()

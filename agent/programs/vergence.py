@@ -7,6 +7,13 @@ epsilon-greedy around the current policy. After every `samples_per_iteration` sa
 iteration, then the greedy policy runs from every start state; traces are action sequences, the
 trace distance is the indel edit distance (for pure converge traces: the difference of their
 lengths, Eq 7.3), classical MDS to 1-D.
+
+Which policy's map is published (`accept`, on by default): a sweep is scored without truth by the
+fraction of its traces that reached the goal and their mean length (`acceptance.sweep_score`); a
+policy that does worse than the accepted one is not embedded, and the policy's map stays the published one (an event says so; LSPI keeps iterating). LSPI over the foveal difference alone can fall from
+a perfect policy to one that oscillates from a few starts (d is aliased: one d at many vergences);
+one trace that never reaches the goal is 100 actions long and throws the whole 1-D map off
+(Procrustes 0.5-1.0 instead of 0.002 on the stereo pair), so that map is not the agent's best.
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
 from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
+from sensorimotor.agent.programs.acceptance import Score, compare, sweep_score
 from sensorimotor.agent.programs.background import Background
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
@@ -37,12 +45,21 @@ def foveal_difference(obs: Observation) -> float:
 
 
 def lspi_job(
-    centres: list[float], width: float, gamma: float, ridge: float, capacity: int, samples: dict[str, Any]
+    centres: list[float],
+    width: float,
+    gamma: float,
+    ridge: float,
+    capacity: int,
+    samples: dict[str, Any],
+    n_actions: int = 2,
 ) -> dict[str, Any]:
     """One LSPI iteration (RBF features of the foveal difference, 2 actions) over a snapshot of the
     samples: the new weights and their change. A pure function, run off the act path."""
     lspi = LSPI(
-        RBFBasis(tuple(float(c) for c in centres), float(width), 2), gamma=gamma, ridge=ridge, capacity=capacity
+        RBFBasis(tuple(float(c) for c in centres), float(width), n_actions),
+        gamma=gamma,
+        ridge=ridge,
+        capacity=capacity,
     )
     lspi.restore(samples)
     change = lspi.iterate()
@@ -104,6 +121,7 @@ class VergencePractice:
                     ridge=self.lspi.ridge,
                     capacity=self.lspi.capacity,
                     samples=self.lspi.samples(),
+                    n_actions=basis.n_actions,
                 )
             return False
         self.new_samples = 0
@@ -137,7 +155,8 @@ class VergencePractice:
 
     def choose(self, d: float) -> int:
         """An epsilon-greedy vergence action for difference `d` (remembered for `observe`)."""
-        a = int(self.rng.integers(2)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
+        n = self.lspi.basis.n_actions if isinstance(self.lspi.basis, RBFBasis) else 2
+        a = int(self.rng.integers(n)) if self.rng.random() < self.epsilon else self.lspi.greedy(d)
         self._prev = (d, a)
         return a
 
@@ -161,13 +180,16 @@ class VergenceProgramParams:
         "(the LSPI has 24 features: a few ms; a short lag keeps the practice samples near the current policy)",
         min=1,
     )
+    accept: bool = option(
+        True, "publish a sweep's map only when its policy reaches the goal from as many starts as the accepted one"
+    )
 
 
 class VergenceProgram(Program):
     """The vergence program (ch. 7): LSPI verging, vergence-trace lengths embedded as 1-D depth.
 
     Built by `make_program` as `VergenceProgram(spec, seed, params=None, **overrides)`; the
-    hyperparameters are `VergenceProgramParams`. Needs 2 discrete actions (converge, diverge),
+    hyperparameters are `VergenceProgramParams`. Needs 1 or 2 discrete actions (converge[, diverge]),
     sensors "left" and "right", and >= 2 start states.
     """
 
@@ -181,17 +203,22 @@ class VergenceProgram(Program):
         self.params = prm = parse(VergenceProgramParams, overrides, name=self.name, base=params)
         samples_per_iteration, epsilon, gamma, ridge = prm.samples_per_iteration, prm.epsilon, prm.gamma, prm.ridge
         max_trace, centres, width = prm.max_trace, prm.centres, prm.width
-        if not spec.action_space.discrete or spec.action_space.n != 2 or spec.n_starts < 2:
-            raise SpecMismatch("vergence program needs 2 discrete actions (converge, diverge) and >= 2 start states")
+        if not spec.action_space.discrete or spec.action_space.n not in (1, 2) or spec.n_starts < 2:
+            raise SpecMismatch(
+                "vergence program needs 1 or 2 discrete actions (converge[, diverge]) and >= 2 start states"
+            )
         spec.sensor("left"), spec.sensor("right")
         self.samples_per_iteration = samples_per_iteration
         self.epsilon = epsilon
         self.max_trace = max_trace
-        self.lspi = LSPI(RBFBasis(tuple(float(c) for c in centres), width, 2), gamma=gamma, ridge=ridge)
+        n_actions = int(spec.action_space.n or 2)
+        self.lspi = LSPI(RBFBasis(tuple(float(c) for c in centres), width, n_actions), gamma=gamma, ridge=ridge)
         self.practice = VergencePractice(self.lspi, self.rng, samples_per_iteration, epsilon)
         self.phase = "explore"
         self._sweep = StartStateSweep(spec.n_starts, max_trace)
         self._pending_embedding: dict[str, Any] | None = None  # what the embed job in flight is of
+        self.accept = prm.accept
+        self._accepted: Score | None = None  # the sweep score of the policy whose map was published last
         self.use_background(prm.learn_lag)
 
     def act(self, obs: Observation) -> Decision:
@@ -226,6 +253,27 @@ class VergenceProgram(Program):
         """The sweep is over: start the distances + MDS job; `_embedded` emits its result."""
         traces = [list(t) for t in self._sweep.traces]
         n = len(traces)
+        if self.accept:
+            score = sweep_score(list(self._sweep.reached), traces)
+            verdict = compare(score, self._accepted, stochastic=False)
+            if not (verdict.better or verdict.equal):
+                assert self._accepted is not None  # compare(x, None) is better
+                self.emit(
+                    EventOutput(
+                        EventKind.EVALUATION,
+                        f"policy of LSPI iteration {self.lspi.iterations} not accepted: goal from "
+                        f"{score.fraction:.0%} of starts (accepted policy: {self._accepted.fraction:.0%}); "
+                        "its map is not published",
+                        step,
+                        {
+                            "policy_success": score.fraction,
+                            "accepted": 0.0,
+                            "lspi_iterations": float(self.lspi.iterations),
+                        },
+                    )
+                )
+                return
+            self._accepted = score
         assert self.background is not None
         self.background.submit("embed", embed_job, traces=traces)
         self._pending_embedding = {
@@ -265,6 +313,9 @@ class VergenceProgram(Program):
             "phase": self.phase,
             "sweep": self._sweep.state(),
             "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
+            "accepted": None
+            if self._accepted is None
+            else [self._accepted.fraction, self._accepted.length, self._accepted.traces],
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -277,6 +328,8 @@ class VergenceProgram(Program):
         self._sweep.restore(state["sweep"])
         pending = state.get("pending_embedding")
         self._pending_embedding = None if pending is None else dict(pending)
+        acc = state.get("accepted")  # absent in snapshots from before acceptance
+        self._accepted = None if acc is None else Score(float(acc[0]), float(acc[1]), int(acc[2]))
 
     def world_restarted(self) -> None:
         """Drop the pending sample and restart the trace in progress."""

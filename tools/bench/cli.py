@@ -8,11 +8,25 @@ import argparse
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench",
-        help="benchmarks (loop, embedding, record, detectors, world, fuzz, gap, soak, scale, zoo, ros2)",
+        help="benchmarks (loop, embedding, record, detectors, world, fuzz, gap, soak, scale, zoo, car, ros2, changes)",
         description="Run a benchmark; see its --help.",
     )
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
-    from sensorimotor.tools.bench import detectors, embedding, fuzz, gap, loop, record, ros2, scale, soak, world, zoo
+    from sensorimotor.tools.bench import (
+        car,
+        changes_cli,
+        detectors,
+        embedding,
+        fuzz,
+        gap,
+        loop,
+        record,
+        ros2,
+        scale,
+        soak,
+        world,
+        zoo,
+    )
 
     loop.add_parser(bsub)
     embedding.add_parser(bsub)
@@ -24,5 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     soak.add_parser(bsub)
     scale.add_parser(bsub)
     zoo.add_parser(bsub)
+    car.add_parser(bsub)
+    changes_cli.add_parser(bsub)
     ros2.add_parser(bsub)
     p.set_defaults(func=lambda a: p.print_help() or 2)

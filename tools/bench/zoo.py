@@ -1,5 +1,5 @@
 """`sme bench zoo`: the generic program on worlds nobody here wrote (Gymnasium toy text, classic
-control, MiniGrid, panda-gym), in-process and seeded. Per world and seed: final and best Procrustes
+control, MiniGrid, panda-gym) and on arms of 6 and 7 joints, in-process and seeded. Per world and seed: final and best Procrustes
 error of the embeddings against the declared truth, trustworthiness of the final one, the fraction
 of starts whose greedy trace reached the goal, steps and seconds to the first embedding below 0.1,
 whether any version after convergence was over 1.5x worse than the best before it without a detected
@@ -64,6 +64,15 @@ def _lakes() -> tuple[ZooWorld, ...]:
     )
 
 
+def _arms() -> tuple[ZooWorld, ...]:
+    """Arms commanded in 6 and 7 joints (`sme world arm`, docs/arm.md): 128 sampled start poses each,
+    the joints' angles served beside the camera (the arm world's default from 5 joints)."""
+    return (
+        ZooWorld("Arm Kuka iiwa, 7 joints", "arm", {"n_joints": "7"}, {}, 30_000, 12_000),
+        ZooWorld("Arm xArm6, 6 joints", "arm", {"urdf": "xarm/xarm6_robot.urdf", "n_joints": "6"}, {}, 20_000, 12_000),
+    )
+
+
 ZOO: tuple[ZooWorld, ...] = (
     ZooWorld("FrozenLake 8x8", "gym:FrozenLake-v1", {"map_name": "8x8", "is_slippery": "false"}, {}, 50_000, 10_000),
     ZooWorld("FrozenLake 4x4 slippery", "gym:FrozenLake-v1", {}, {}, 60_000, 20_000),
@@ -107,6 +116,7 @@ ZOO: tuple[ZooWorld, ...] = (
         "panda_gym",
     ),
     *_lakes(),
+    *_arms(),
 )
 
 

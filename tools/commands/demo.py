@@ -7,7 +7,9 @@ at the run's pace. The summary says the first, best and final Procrustes error, 
 versions are near the best, from how many start states the greedy policy reached the goal and,
 when the world was not embedded or cannot be scored, why and what to do (`tools.summary`).
 `--plot DIR` writes the final map in the truth's units beside the error and goal fraction per
-step as a PNG (`tools.plot`)."""
+step as a PNG (`tools.plot`). `--perturb KIND@STEP` changes the body once the world has taken STEP
+steps (the agent is not told); the summary says when the change was noticed and how well the map
+came back."""
 
 from __future__ import annotations
 
@@ -20,8 +22,9 @@ import time
 from typing import Any
 
 from sensorimotor.agent.daemon import AgentDaemon
+from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusConfig, BusError, add_bus_arguments, bus_config_from_args
-from sensorimotor.protocol.messages import AgentEvent, Embedding
+from sensorimotor.protocol.messages import AgentEvent, Control, Embedding, EventKind, Trigger
 from sensorimotor.protocol.params import assignments
 from sensorimotor.tools.common import EMBEDDING_COLUMNS, format_embedding, format_event, output_closed
 from sensorimotor.tools.summary import settled, still_to_go, verdict
@@ -68,11 +71,78 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="write the final embedding as DIR/<world>.png: truth, the map aligned onto it in its units and "
         "coloured by true position, the error and goal fraction per step, the eigenvalue spectrum",
     )
+    p.add_argument(
+        "--perturb",
+        default=None,
+        metavar="KIND@STEP",
+        help="change the body once the world has taken STEP steps: KIND[:K=V,...]@STEP, e.g. reverse@5000 or "
+        "lesion:what=sensor@8000 (the kinds: `sme perturb --list --world ID`); the summary says when it was "
+        "noticed and how well the map came back",
+    )
     add_bus_arguments(p, "agent")
     p.set_defaults(func=main_args, log_default=-1)  # quiet logs unless -v: the demo prints its own progress
 
 
+def parse_perturb(text: str) -> tuple[str, dict[str, str], int]:
+    """``KIND[:K=V,...]@STEP`` as (kind, params, step); a ValueError that shows the form."""
+    form = "KIND[:K=V,...]@STEP, e.g. reverse@5000 or lesion:what=sensor@8000"
+    what, at, step = text.rpartition("@")
+    if not at or not what or not step.strip().isdigit():
+        raise ValueError(f"--perturb {text!r}: expected {form}")
+    kind, _, rest = what.partition(":")
+    params: dict[str, str] = {}
+    for item in filter(None, rest.split(",")):
+        k, eq, v = item.partition("=")
+        if not eq or not k:
+            raise ValueError(f"--perturb {text!r}: parameter {item!r} is not K=V; expected {form}")
+        params[k.strip()] = v.strip()
+    return kind.strip(), params, int(step)
+
+
+def change_summary(
+    kind: str, at: int | None, seconds: float | None, embeddings: list[Embedding], events: list[AgentEvent]
+) -> list[str]:
+    """The summary's lines on a scripted body change: when it came, when the agent noticed and how
+    well the relearned map came back (error before and after, against the changed body's truth)."""
+    if at is None:
+        return [f"  body change {kind}: not applied (the run ended first; --steps or --seconds runs longer)"]
+    applied = [e for e in events if e.kind == EventKind.WORLD_EVENT and e.reason == "control_applied"]
+    refused = [e for e in events if e.kind == EventKind.WORLD_EVENT and e.reason == "control_refused"]
+    if refused and not applied:
+        return [f"  body change {kind} at step {at:,}: refused by the world ({refused[0].detail})"]
+    lines = [f"  body change {kind} at step {at:,}" + (f" ({applied[0].detail})" if applied else "")]
+    drop = next((e for e in events if e.kind == EventKind.DROP_DETECTED and e.step >= at), None)
+    if drop is None:
+        lines.append("  not noticed within the run (no reward drop detected after it)")
+        return lines
+    when = ""
+    if seconds is not None and drop.timestamp:
+        dt = max(0.0, drop.timestamp - seconds)
+        when = f", {dt * 1000:.0f} ms" if dt < 1 else f", {dt:.1f} s"
+    lines.append(f"  noticed at step {drop.step:,}: {drop.step - at:,} steps{when} after the change ({drop.detail})")
+    before = [e for e in embeddings if e.step <= at and e.procrustes_error is not None]
+    again = next((e for e in embeddings if e.trigger == Trigger.RELEARNED and e.step >= drop.step), None)
+    if again is None:
+        lines.append("  not relearned within the run (--seconds S runs longer)")
+        return lines
+    err = "" if again.procrustes_error is None else f", error {again.procrustes_error:.4f}"
+    if before and again.procrustes_error is not None:
+        b = float(before[-1].procrustes_error or 0.0)
+        err += f" (before the change {b:.4f}, {again.procrustes_error / max(b, 1e-9):.2f}x)"
+    lines.append(
+        f"  relearned: v{again.version} at step {again.step:,}, {again.step - at:,} steps after the change{err}"
+    )
+    return lines
+
+
 def main_args(args: argparse.Namespace) -> int:
+    scripted: tuple[str, dict[str, str], int] | None = None
+    if args.perturb is not None:
+        try:
+            scripted = parse_perturb(args.perturb)
+        except ValueError as e:
+            print(f"sme demo: {e}", file=sys.stderr)
+            return 2
     if args.steps is not None and args.steps < 1:
         print("sme demo: --steps must be >= 1", file=sys.stderr)
         return 2
@@ -141,6 +211,8 @@ def main_args(args: argparse.Namespace) -> int:
     spec = world.spec()
     told_wait = False
     at_bound = False
+    change_at: int | None = None
+    change_t: float | None = None
     with agent_bus, world:
         daemon = AgentDaemon(agent_bus, seed=args.seed, on_output=on_output)
         daemon.start()
@@ -155,6 +227,17 @@ def main_args(args: argparse.Namespace) -> int:
             return 2
         with world_bus:
             node = WorldNode(world, world_bus, wid, max_steps=args.steps)
+            ctl = None
+            if scripted is not None:
+                from sensorimotor.tools.commands.perturb import refuse_locally
+
+                ctl = Control(wid, scripted[0], scripted[1], 1, time.time())
+                why = refuse_locally(node.body.spec(), ctl)
+                if why is not None:
+                    print(f"sme demo: --perturb: {why}", file=sys.stderr)
+                    daemon.stop()
+                    daemon.close()
+                    return 2
             nthread = threading.Thread(target=node.run, daemon=True)
             nthread.start()
             next_tick = 5.0
@@ -164,11 +247,21 @@ def main_args(args: argparse.Namespace) -> int:
                     broken_pipe.set()
                     break
                 el = time.monotonic() - t0
+                if ctl is not None and change_at is None and scripted is not None and node.stats.steps >= scripted[2]:
+                    change_at, change_t = node.stats.steps, time.time()
+                    world_bus.put(keys.world_ctl(wid), codec.encode(ctl), codec.schema_name(Control))
+                    say(
+                        f"{el:6.1f}s [{wid}] >> body change {ctl.kind} sent at step {change_at:,} (the agent is not told)"
+                    )
+                waiting = ctl is not None and (
+                    change_at is None
+                    or not any(e.trigger == Trigger.RELEARNED and e.step >= change_at for e in embeddings)
+                )
                 if el >= seconds:
                     can_embed = not any(
                         e.reason == "no_start_states" for e in events
                     )  # the retina embeds fields, not starts
-                    if bounded or not can_embed or settled(embeddings, events):
+                    if bounded or not can_embed or (settled(embeddings, events) and not waiting):
                         break
                     if el >= MAX_SECONDS:
                         at_bound = True
@@ -207,6 +300,9 @@ def main_args(args: argparse.Namespace) -> int:
     result = verdict(embeddings, events, has_truth=final_truth is not None, n_starts=spec.n_starts, seconds=el)
     for line in result.lines:
         print(line)
+    if scripted is not None:
+        for line in change_summary(scripted[0], change_at, change_t, embeddings, events):
+            print(line)
     if at_bound:
         pace = node.stats.steps / max(el, 1e-9)
         print(

@@ -2,7 +2,9 @@
 
 Per world: each embedding version as 2-D points (coloured by the true coordinates when the world
 gives truth), its Procrustes error, the episode reward and its moving average, the drop detector's
-statistic (polled from the daemon's status), agent events as a text log, and camera frames.
+statistic (polled from the daemon's status), agent events as a text log, and camera frames. A body
+change is marked under ``{world}/changes`` three times: when the world applied it, when the agent
+noticed (a drop detected) and when the relearned map came.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ import numpy as np
 from sensorimotor.protocol import codec, images, keys
 from sensorimotor.protocol.bus import Bus, BusError, BusMessage, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding, Observation, Truth
+from sensorimotor.protocol.messages import AgentEvent, AgentStatus, Embedding, Observation, Truth, WorldEvent
 from sensorimotor.tools.commands.replay import classify
+from sensorimotor.tools.commands.watch import change_mark
 
 PALETTE = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75], [227, 119, 194]],
@@ -70,6 +73,16 @@ class RerunLogger:
         kind, wid, _ = classify(topic)
         rr = self.rr
         try:
+            if topic.startswith(f"{keys.PREFIX}/world/") and topic.endswith("/event"):  # a world's own report
+                w = codec.decode(WorldEvent, payload)
+                wid = w.world_id
+                mark = change_mark(w.kind)
+                if mark is None:
+                    return
+                self._time(t, w.step or None)
+                rr.log(f"{wid}/changes", rr.TextLog(f"{mark}: {w.reason}: {w.detail}", level="WARN"))
+                self.logged += 1
+                return
             if kind == "embedding":
                 e = codec.decode(Embedding, payload)
                 self._time(t, e.step)
@@ -91,6 +104,9 @@ class RerunLogger:
                 self._time(t, e.step or None)
                 level = "WARN" if e.kind in ("drop_detected", "bad_input", "program_error") else "INFO"
                 rr.log(f"{wid}/events", rr.TextLog(f"{e.kind}: {e.detail}", level=level))
+                mark = change_mark(e.kind, e.reason)
+                if mark is not None and e.kind != "world_event":  # the world's own report is marked
+                    rr.log(f"{wid}/changes", rr.TextLog(f"{mark}: {e.detail}", level=level))
             elif kind == "obs":
                 o = codec.decode(Observation, payload)
                 if o.done or o.reward:
@@ -184,6 +200,7 @@ def main_args(args: argparse.Namespace) -> int:
             keys.ALL_EVENTS,
             keys.ALL_OBS,
             f"{keys.PREFIX}/world/*/truth",
+            keys.ALL_WORLD_EVENTS,
             f"{keys.PREFIX}/world/*/image/*",
         ):
             bus.subscribe(expr, lambda m: inbox.append((m, time.time())))

@@ -1,4 +1,6 @@
-"""`sme watch`: print embedding versions and agent events as they arrive."""
+"""`sme watch`: print embedding versions and agent events as they arrive; a body change is marked
+three times: when the world applied it (its own report), when the agent noticed (a drop detected)
+and when the relearned map came (`change_mark`)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import time
 from sensorimotor.protocol import codec, keys
 from sensorimotor.protocol.bus import Bus, BusError, add_bus_arguments, bus_config_from_args
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import AgentEvent, Embedding
+from sensorimotor.protocol.messages import AgentEvent, Embedding, EventKind, WorldEvent, WorldEventKind
 from sensorimotor.tools.common import (
     EMBEDDING_COLUMNS,
     EXIT_INTERRUPTED,
@@ -26,13 +28,50 @@ from sensorimotor.tools.common import (
 
 log = logging.getLogger("sme.watch")
 
+#: the marks of a body change: applied by the world, noticed by the agent, relearned
+MARKS: dict[str, str] = {
+    WorldEventKind.CONTROL_APPLIED: "change",
+    WorldEventKind.CONTROL_REFUSED: "change refused",
+    EventKind.DROP_DETECTED: "noticed",
+    EventKind.RELEARNED: "relearned",
+}
+
+
+def change_mark(kind: str, reason: str = "") -> str | None:
+    """Which mark of a body change an event is (a world's `control_applied`/`control_refused`, or the
+    agent's passing-on of one as `world_event`; `drop_detected`; `relearned`), else None."""
+    if kind == EventKind.WORLD_EVENT:
+        kind = reason
+    return MARKS.get(kind)
+
+
+def format_change(ev: WorldEvent) -> str:
+    """A world's report of a control as one marked line."""
+    mark = change_mark(ev.kind) or ev.kind
+    return f">> [{ev.world_id}] {mark}: {ev.reason}: {ev.detail}"
+
+
+def world_event_dict(ev: WorldEvent) -> dict[str, object]:
+    """A world's report of a control as a JSON-ready dict (`type` world_event, with its `mark`)."""
+    return {
+        "type": "world_event",
+        "world": ev.world_id,
+        "kind": ev.kind,
+        "reason": ev.reason,
+        "detail": ev.detail,
+        "step": ev.step,
+        "timestamp": ev.timestamp,
+        "mark": change_mark(ev.kind),
+    }
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "watch",
         help="print embedding versions and agent events as they arrive",
         description="Subscribe to the agent's embeddings and events and print them, one line each. Waits for "
-        "the agent if it is not up yet. Exit status 1 if --timeout passes before --count "
+        "the agent if it is not up yet. A body change is marked (lines beginning '>>', or a 'mark' in --json): "
+        "when the world applied it, when the agent noticed, when the map was relearned. Exit status 1 if --timeout passes before --count "
         "embeddings arrived (130 if Ctrl-C comes first). Each embedding line: " + EMBEDDING_COLUMNS + ".",
     )
     p.add_argument(
@@ -87,12 +126,29 @@ def main_args(args: argparse.Namespace) -> int:
 
         return on
 
+    def show_event(e: AgentEvent) -> None:
+        mark = change_mark(e.kind, e.reason)
+        if e.kind == EventKind.WORLD_EVENT and mark is not None:
+            return  # the world's own report of a control is shown (the agent passes it on, rate-limited)
+        if args.json:
+            print_json(event_dict(e) | ({"mark": mark} if mark else {}))
+        else:
+            print((">> " if mark else "") + format_event(e), flush=True)
+
+    def show_world_event(ev: WorldEvent) -> None:
+        if change_mark(ev.kind) is None:
+            return
+        if args.json:
+            print_json(world_event_dict(ev))
+        else:
+            print(format_change(ev), flush=True)
+
     if args.json:
         on_embedding = receiver(Embedding, lambda e: print_json(embedding_dict(e, args.coords)), True)
-        on_event = receiver(AgentEvent, lambda e: print_json(event_dict(e)), False)
     else:
         on_embedding = receiver(Embedding, lambda e: print(format_embedding(e), flush=True), True)
-        on_event = receiver(AgentEvent, lambda e: print(format_event(e), flush=True), False)
+    on_event = receiver(AgentEvent, show_event, False)
+    on_world_event = receiver(WorldEvent, show_world_event, False)
 
     def on_signal(*_: object) -> None:
         interrupted.set()
@@ -105,6 +161,7 @@ def main_args(args: argparse.Namespace) -> int:
         bus.subscribe(embeddings, on_embedding)
         if not args.no_events:
             bus.subscribe(f"{keys.PREFIX}/agent/{args.agent}/event/{args.world}", on_event)
+            bus.subscribe(keys.world_event(args.world), on_world_event)
         log.info("watching %s%s", embeddings, "" if args.no_events else " and events")
         deadline = None if args.timeout is None else time.monotonic() + args.timeout
         while not done.is_set():

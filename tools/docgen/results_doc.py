@@ -31,6 +31,7 @@ PAGES = (
     "docs/commands/bench.md",
     "docs/arm.md",
     "docs/zoo.md",
+    "docs/body-changes.md",
 )
 
 
@@ -95,6 +96,56 @@ def jsonl_table(
         return "\n".join(lines) + f"\n\nFrom `{src.command}` (its output: `docs/{src.file}`)."
 
     return render_jsonl
+
+
+def zoo_seed_means(rows: tuple[tuple[str, str, str, str], ...]) -> Callable[[Source, str], str]:
+    """A renderer of `sme bench zoo --json` runs kept in several files: per (label, world as the bench
+    names it, file under docs/, the command that wrote it), the means over the file's seeds of the
+    final error, trustworthiness, goal fraction and the sensor-only peers; the worst ratio after
+    convergence (the largest over the seeds) and the false alarms (summed)."""
+
+    def mean(runs: list[dict], key: str) -> float | None:
+        vals = [float(r[key]) for r in runs if r.get(key) is not None]
+        return sum(vals) / len(vals) if vals else None
+
+    def render(src: Source, text: str) -> str:
+        head = (
+            "world",
+            "learner",
+            "final error",
+            "trustworthiness",
+            "goal reached",
+            "PCA",
+            "Isomap",
+            "worst after convergence",
+            "false alarms",
+            "seeds",
+            "command (its output)",
+        )
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for label, world, file, command in rows:
+            found = [json.loads(ln) for ln in (DOCS / file).read_text().splitlines() if ln.strip().startswith("{")]
+            runs = [r for r in found if not r.get("summary") and r.get("world") == world]
+            if not runs:
+                raise ValueError(f"no runs of {world!r} in docs/{file}")
+            worst = [float(r["worst_ratio"]) for r in runs if r.get("worst_ratio") is not None]
+            cells = (
+                label,
+                runs[0].get("learner"),
+                mean(runs, "final_error"),
+                mean(runs, "trustworthiness"),
+                mean(runs, "goal_reached_fraction"),
+                mean(runs, "pca_error"),
+                mean(runs, "isomap_error"),
+                f"{max(worst):.2f}x" if worst else None,
+                sum(int(r.get("drops") or 0) for r in runs),
+                len(runs),
+                (command if command.startswith("(") else f"`{command}`") + f" (`docs/{file}`)",
+            )
+            lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+        return "\n".join(lines)
+
+    return render
 
 
 def markdown_file(src: Source, text: str) -> str:
@@ -196,6 +247,35 @@ SOURCES: dict[str, Source] = {
         command_output,
     ),
     "bench-world-arm": Source("sme bench world --world arm", "results/bench-world-arm/output.txt", command_output),
+    "arm-truth": Source(
+        "python -m sensorimotor.tools.experiments.arm_truth --n-joints 7 --poses 200000",
+        "results/arm-truth/output.md",
+        markdown_file,
+    ),
+    "arm-many-joints": Source(
+        "sme bench zoo --defaults --seeds 3 --json --world kuka --world xarm6",
+        "results/bench-zoo-arms/runs.jsonl",
+        jsonl_table(
+            (
+                ("world (`--world` names it)", "world"),
+                ("seed", "seed"),
+                ("steps", "steps"),
+                ("learner", "learner"),
+                ("starts", "n_starts"),
+                ("final error", "final_error"),
+                ("best", "best_error"),
+                ("trustworthiness", "trustworthiness"),
+                ("goal reached", "goal_reached_fraction"),
+                ("maps published", "embeddings"),
+                ("steps/s", "steps_per_second"),
+                ("PCA", "pca_error"),
+                ("Isomap", "isomap_error"),
+                ("worse than 1.5x the best before", "regressions"),
+                ("false alarms", "drops"),
+            ),
+            keep=lambda r: not r.get("summary"),
+        ),
+    ),
     "zoo-defaults": Source(
         "sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world MiniGrid",
         "results/bench-zoo-defaults/runs.jsonl",
@@ -289,6 +369,77 @@ SOURCES["bench-fuzz"] = Source(
             ("machine busy", "cpu.fuzz.machine_busy"),
         )
     ),
+)
+SOURCES["zoo-continuous"] = Source(
+    "sme bench zoo --seeds 3 --json --world NAME",
+    "results/bench-zoo-mountaincar/runs.jsonl",
+    zoo_seed_means(
+        (
+            (
+                "MountainCar-v0",
+                "MountainCar",
+                "results/bench-zoo-mountaincar/runs.jsonl",
+                "sme bench zoo --seeds 3 --world MountainCar",
+            ),
+            (
+                "MountainCarContinuous-v0, padded sum",
+                "MountainCarContinuous",
+                "results/bench-zoo-mountaincar/runs.jsonl",
+                "(the same command)",
+            ),
+            (
+                "MountainCarContinuous-v0, DTW (`distance=dtw`)",
+                "MountainCarContinuous, DTW",
+                "results/bench-zoo-mountaincar/runs.jsonl",
+                "(the same command)",
+            ),
+            (
+                "PandaReach-v3, hand position, padded sum",
+                "PandaReach (state)",
+                "results/bench-zoo-panda/state-padded.jsonl",
+                'sme bench zoo --seeds 3 --world "PandaReach (state)"',
+            ),
+            (
+                "PandaReach-v3, hand position, net moves, half moves (`distance=net`, `action_scale=0.5`)",
+                "PandaReach (state), net move, half moves",
+                "results/bench-zoo-panda/state-net-half-moves.jsonl",
+                'sme bench zoo --seeds 3 --world "PandaReach (state), net move"',
+            ),
+            (
+                "PandaReach-v3, 64 x 64 grey frames (`observe=pixels`), net moves, half moves, whole-move warm-up (`motor_scale=1`)",
+                "PandaReach (pixels), half moves, whole-move warm-up",
+                "results/bench-zoo-panda/pixels-ranked-by-ends.jsonl",
+                "sme bench zoo --seeds 3 --world pixels --workers 2",
+            ),
+        )
+    ),
+)
+
+
+def _bench_changes(name: str) -> Callable[[Source, str], str]:
+    """A renderer of tools/bench/changes.py (imported when a page is rendered)."""
+
+    def render(src: Source, text: str) -> str:
+        from sensorimotor.tools.bench import changes
+
+        return str(getattr(changes, name)(src, text))
+
+    return render
+
+
+SOURCES["demo-perturb"] = Source(
+    "sme demo --world gym:FrozenLake-v1 --param map_name=8x8 --param is_slippery=false --perturb permute@3000 "
+    "--seconds 40",
+    "results/demo-perturb/output.txt",
+    demo_output,
+)
+SOURCES["bench-changes"] = Source(
+    "sme bench changes --seeds 3 --json", "results/bench-changes/runs.jsonl", _bench_changes("render_scorecard")
+)
+SOURCES["bench-changes-life"] = Source(
+    "sme bench changes --life 20 --seeds 1 --json",
+    "results/bench-changes-life/runs.jsonl",
+    _bench_changes("render_life"),
 )
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
 QUICK_ALL = "sme reproduce all --quick --runs 10"

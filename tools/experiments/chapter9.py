@@ -1,413 +1,67 @@
 """Chapter 9 experiments (beyond the dissertation): probabilistic sensorimotor embedding in a
 slippery gridworld, option discovery, policy maps of the mountain car, and two variations
-(Isomap in place of MDS; state-aided vergence traces)."""
+(Isomap in place of MDS; state-aided vergence traces).
+
+The experiments live in `chapter9_embedding` (9.4, 9.5) and `chapter9_policies` (9.6); this module
+is the chapter as `sme reproduce chapter9` runs it: the seeded jobs, the table and the figures."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from sensorimotor.agent.embedding import classical_mds, procrustes_error, trace_distances
-from sensorimotor.agent.embedding.probabilistic import (
-    mean_pair_distances,
-    mode_distances,
-    sample_until_settled,
-)
-from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 from sensorimotor.tools.experiments import scoring
-from sensorimotor.tools.experiments.scoring import score_points
+from sensorimotor.tools.experiments.chapter9_embedding import (
+    ProbabilisticResult,
+    far_error,
+    greedy_trace,
+    isomap_coordinates,
+    isomap_job,
+    probabilistic_gridworld,
+    probabilistic_job,
+    state_aided_job,
+    substep_offset,
+    train_lspi_gridworld,
+)
+from sensorimotor.tools.experiments.chapter9_policies import (
+    OUTCOMES,
+    GridTable,
+    OptionCurve,
+    greedy_steps,
+    mountaincar_traces,
+    option_world,
+    options_job,
+    policy_map_job,
+    train_mountaincar,
+    train_options_agent,
+)
 from sensorimotor.tools.experiments.shared import ci95, fmt, pool_map
-from sensorimotor.worlds.gridworld import GridWorld
 
-# --- probabilistic sensorimotor embedding (9.4) --------------------------------------------------
-
-
-def train_lspi_gridworld(world: GridWorld, seed: int, samples: int = 8000, iterations: int = 12) -> LSPI:
-    """LSPI on uniformly random-walk samples of `world` (as the ch. 5 program explores)."""
-    rng = np.random.default_rng(seed)
-    n_actions = len(world.moves)
-    lspi = LSPI(TabularBasis(len(world.cells), n_actions), gamma=0.9, ridge=1e-3, capacity=samples)
-    s = int(world.reset(start=-1).tensors["state"][0])
-    for _ in range(samples):
-        a = int(rng.integers(n_actions))
-        r = world.step(np.array([a]))
-        s2 = int(r.tensors["state"][0])
-        lspi.learn_one(s, a, r.reward, s2, r.done)
-        s = int(world.reset(start=-1).tensors["state"][0]) if r.done else s2
-    for _ in range(iterations):
-        if lspi.iterate() < 1e-6:
-            break
-    return lspi
-
-
-def greedy_trace(world: GridWorld, lspi: LSPI, start: int, max_trace: int = 60) -> list[int]:
-    """One trace of the greedy policy from `start` (a new sample each call when the world slips)."""
-    r = world.reset(start=start)
-    trace: list[int] = []
-    while not r.done and len(trace) < max_trace:
-        a = lspi.greedy(int(r.tensors["state"][0]), trace[-1] if trace else None)
-        trace.append(a)
-        r = world.step(np.array([a]))
-    return trace
-
-
-@dataclass(frozen=True)
-class ProbabilisticResult:
-    """Procrustes errors of the plain, mode and mean-distance estimators on one world, and the
-    samples per start the adaptive sampling chose for each."""
-
-    seed: int
-    slip: float
-    plain: float
-    mode: float
-    mean: float
-    mean_debiased: float
-    samples_mode: int
-    samples_mean: int
-    field_scores: dict[str, dict[str, float] | None] = field(default_factory=dict)  # estimator -> scoring.score_points
-
-
-def probabilistic_gridworld(
-    seed: int, slip: float = 0.2, size: int = 9, tol: float = 0.02, max_samples: int = 64
-) -> ProbabilisticResult:
-    """Plain (one sampled trace per start) against the two ch. 9.4 estimators, in a gridworld whose
-    moves slip sideways with probability `slip`; LSPI policy learnt in the same slippery world."""
-    world = GridWorld(seed=seed, size=size, slip=slip)
-    lspi = train_lspi_gridworld(world, seed)
-    truth = world.truth().tensors["positions"]
-    n = len(world.cells)
-
-    fields: dict[str, dict[str, float] | None] = {}
-
-    def err(D: np.ndarray, name: str) -> float:
-        X = classical_mds(D, 2).coordinates
-        fields[name] = score_points(truth, X)
-        return procrustes_error(truth, X)
-
-    plain = [greedy_trace(world, lspi, i) for i in range(n)]
-    e_plain = err(trace_distances(plain, kind="edit", substitution_cost=2), "plain")
-    mode = sample_until_settled(
-        lambda i: greedy_trace(world, lspi, i), n, mode_distances, tol=tol, max_samples=max_samples
-    )
-    mean = sample_until_settled(
-        lambda i: greedy_trace(world, lspi, i), n, mean_pair_distances, tol=tol, max_samples=max_samples
-    )
-    return ProbabilisticResult(
-        seed,
-        slip,
-        e_plain,
-        err(mode.distances, "mode"),
-        err(mean.distances, "mean"),
-        err(mean_pair_distances(mean.samples, debias=True), "mean_debiased"),
-        mode.n_samples,
-        mean.n_samples,
-        fields,
-    )
-
-
-def probabilistic_job(seed: int, slip: float, size: int = 9) -> dict[str, Any]:
-    """`probabilistic_gridworld` as a picklable job returning a dict."""
-    return dict(probabilistic_gridworld(seed, slip, size).__dict__)
-
-
-# --- option discovery (9.6, Fig 9.3) ----------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class GridTable:
-    """A deterministic gridworld as tables: next cell of (cell, move), the goal cell, BFS distances."""
-
-    next: np.ndarray  # [n_cells, n_moves]
-    goal: int
-    dist: np.ndarray  # [n_cells] shortest path length to the goal
-
-    @staticmethod
-    def of(world: GridWorld) -> GridTable:
-        n, m = len(world.cells), len(world.moves)
-        nxt = np.empty((n, m), dtype=np.int64)
-        for i, (x, y) in enumerate(world.cells):
-            for a, (dx, dy) in enumerate(world.moves):
-                c = (x + dx, y + dy)
-                nxt[i, a] = world.index.get(c, i)
-        goal = world.index[world.goal]
-        dist = np.full(n, -1, dtype=np.int64)
-        dist[goal], frontier = 0, [goal]
-        while frontier:  # BFS backwards (moves are reversible in a gridworld)
-            new = []
-            for cell in frontier:
-                for nb in nxt[cell]:
-                    if dist[nb] < 0:
-                        dist[nb] = dist[cell] + 1
-                        new.append(int(nb))
-            frontier = new
-        return GridTable(nxt, goal, dist)
-
-
-def greedy_steps(table: GridTable, agent: Any, starts: np.ndarray, cap: int = 200) -> float:
-    """Mean primitive steps to the goal of the agent's greedy choices from each start (cap if never)."""
-    total = 0
-    for s0 in starts:
-        s, t = int(s0), 0
-        while s != table.goal and t < cap:
-            for a in agent.actions_of(agent.greedy(s)):
-                s, t = int(table.next[s, a]), t + 1
-                if s == table.goal or t >= cap:
-                    break
-        total += t
-    return total / len(starts)
-
-
-@dataclass(frozen=True)
-class OptionCurve:
-    """Greedy steps to goal after every `every` training steps, and the first training step at
-    which it reached `level` (None: never within the budget)."""
-
-    steps: list[int]
-    mean_steps: list[float]
-    steps_to_level: int | None
-
-
-def train_options_agent(
-    table: GridTable,
-    options: list[tuple[int, ...]],
-    seed: int,
-    budget: int,
-    level: float,
-    every: int = 500,
-    n_eval: int = 40,
-    max_episode: int = 300,
-) -> tuple[OptionCurve, Any]:
-    """SMDP Q-learning with `options` (none: primitives only) from random starts, each step of an
-    option also updating its primitive action (intra-option); training steps count primitive world steps. Stops at the budget or once greedy steps to goal <= `level`."""
-    from sensorimotor.agent.learners.smdp_q import OptionQLearner
-
-    n = table.next.shape[0]
-    agent = OptionQLearner(n, table.next.shape[1], options, alpha=0.5, gamma=0.95, epsilon=0.1, seed=seed)
-    rng = np.random.default_rng(seed)
-    free = np.flatnonzero(np.arange(n) != table.goal)
-    evals = np.random.default_rng(9_000).choice(free, size=min(n_eval, free.size), replace=False)
-    steps: list[int] = []
-    means: list[float] = []
-    t, hit = 0, None
-    while t < budget and hit is None:
-        s, ep = int(rng.choice(free)), 0
-        while s != table.goal and ep < max_episode and hit is None:
-            c = agent.choose(s)
-            s0, R, k = s, 0.0, 0
-            for a in agent.actions_of(c):
-                prev, s = s, int(table.next[s, a])
-                k += 1
-                t += 1
-                ep += 1
-                if c >= agent.n_actions:  # intra-option learning: each step also teaches its primitive
-                    agent.update(prev, a, float(s == table.goal), 1, s, s == table.goal)
-                if s == table.goal:
-                    R += agent.gamma ** (k - 1)
-                    break
-                if t % every == 0:
-                    steps.append(t)
-                    means.append(greedy_steps(table, agent, evals))
-                    if means[-1] <= level:
-                        hit = t
-            agent.update(s0, c, R, k, s, s == table.goal)
-    return OptionCurve(steps, means, hit), agent
-
-
-def option_world(size: int = 15) -> GridWorld:
-    """The options world: a `size` x `size` gridworld with the goal in a far corner."""
-    return GridWorld(seed=0, size=size, goal=(size - 1, size - 1), max_episode_steps=10**6)
-
-
-def options_job(seed: int, budget: int, n_options: int = 4, size: int = 15, level_factor: float = 1.25) -> dict:
-    """One seed of Fig 9.3: a primitives-only agent trained (source seed) gives traces from every
-    start; options discovered from them; new agents with none / random / discovered options, same seed."""
-    from sensorimotor.agent.embedding.options import discover_options, random_options
-
-    table = GridTable.of(option_world(size))
-    free = np.flatnonzero(np.arange(table.next.shape[0]) != table.goal)
-    level = level_factor * float(table.dist[np.random.default_rng(9_000).choice(free, size=40, replace=False)].mean())
-    # the trained policy: a primitives-only agent trained to the level, its greedy traces from every start
-    _, source = train_options_agent(table, [], 10_000 + seed, 10 * budget, level)
-    traces = []
-    for s0 in free:
-        s, tr = int(s0), list[int]()
-        while s != table.goal and len(tr) < 200:
-            a = source.greedy(s)
-            tr.append(a)
-            s = int(table.next[s, a])
-        traces.append(tr)
-    found = discover_options(traces, n_options=n_options, seed=seed)
-    rand = random_options(table.next.shape[1], len(found.options), seed=seed)
-    out: dict[str, Any] = {"seed": seed, "level": level, "discovered_options": found.options, "random_options": rand}
-    for name, opts in (("none", []), ("random", rand), ("discovered", found.options)):
-        curve, _ = train_options_agent(table, opts, seed, budget, level)
-        out[name] = {"steps": curve.steps, "mean_steps": curve.mean_steps, "steps_to_level": curve.steps_to_level}
-    return out
-
-
-# --- policy maps (9.6, Fig 9.2) -----------------------------------------------------------------
-
-OUTCOMES = ("failure", "direct", "rocking")
-
-
-def train_mountaincar(seed: int, train_steps: int, tiles: int = 10, n_tilings: int = 8) -> Any:
-    """Sarsa(lambda) with tile coding on the true (x, v) for `train_steps` car steps (as ch. 8's
-    true-state agent): the trained policy whose behaviour a policy map shows."""
-    from sensorimotor.tools.experiments.mountaincar import true_state_agent, true_state_episode
-    from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams
-
-    prm = MountainCarParams()
-    rng = np.random.default_rng(seed)
-    agent = true_state_agent(seed, prm, tiles, n_tilings)
-    n = 0
-    while n < train_steps:
-        n += true_state_episode(agent, rng, prm, 1000)
-    return agent
-
-
-def mountaincar_traces(agent: Any, n: int, seed: int, cap: int = 300) -> tuple[list[list[int]], list[str]]:
-    """Greedy traces of `agent` from `n` random (x, v) starts and each start's true outcome:
-    ``failure`` (no goal within `cap` car steps), ``direct`` (goal without the car ever moving
-    backwards after its start) or ``rocking`` (goal after at least one backward swing)."""
-    from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, random_state
-    from sensorimotor.worlds.mountaincar_dynamics import step as car_step
-
-    prm = MountainCarParams()
-    rng = np.random.default_rng(seed)
-    traces, outcomes = [], []
-    for _ in range(n):
-        x, v = random_state(rng, prm)
-        tr: list[int] = []
-        backward, done = False, False
-        while not done and len(tr) < cap:
-            a = agent.greedy(np.array([x, v]))
-            tr.append(a)
-            x, v, done = car_step(x, v, a - 1, prm)
-            backward |= v < 0 and len(tr) > 1
-        traces.append(tr)
-        outcomes.append("failure" if not done else ("rocking" if backward else "direct"))
-    return traces, outcomes
-
-
-def policy_map_job(seed: int, train_steps: int, n_starts: int, n_clusters: int | None = 3) -> dict:
-    """Fig 9.2 on one seed: train, trace from `n_starts` random starts, map, and score the clusters
-    against the true outcomes (each cluster's majority outcome and its purity)."""
-    from sensorimotor.agent.embedding.policy_map import policy_map
-
-    agent = train_mountaincar(seed, train_steps)
-    traces, outcomes = mountaincar_traces(agent, n_starts, seed + 1)
-    pm = policy_map(traces, n_clusters=n_clusters, seed=seed)
-    clusters = []
-    out = np.array(outcomes)
-    for c in range(pm.n_clusters):
-        members = out[pm.labels == c]
-        counts = {o: int((members == o).sum()) for o in OUTCOMES}
-        major = max(counts, key=lambda o: counts[o])
-        clusters.append(
-            {
-                "cluster": c,
-                "size": int(members.size),
-                "majority": major,
-                "purity": counts[major] / max(1, members.size),
-                "outcomes": counts,
-            }
-        )
-    return {
-        "seed": seed,
-        "coordinates": pm.coordinates.tolist(),
-        "labels": pm.labels.tolist(),
-        "outcomes": outcomes,
-        "clusters": clusters,
-        "silhouette": pm.silhouette,
-        "mean_length": float(np.mean([len(t) for t in traces])),
-    }
-
-
-# --- variations (9.5) -----------------------------------------------------------------------------
-
-
-def isomap_coordinates(D: np.ndarray, dims: int = 2, n_neighbors: int = 8) -> np.ndarray:
-    """Isomap (scikit-learn) over precomputed trace distances: a non-linear embedding in place of MDS."""
-    from sklearn.manifold import Isomap
-
-    return Isomap(n_neighbors=n_neighbors, n_components=dims, metric="precomputed").fit_transform(D)
-
-
-def isomap_job(seed: int, barrier: bool) -> dict:
-    """Plain (classical MDS) against Isomap on the same LSPI traces of the (barrier) gridworld."""
-    world = GridWorld(seed=seed, barrier=barrier)
-    lspi = train_lspi_gridworld(world, seed)
-    traces = [greedy_trace(world, lspi, i) for i in range(len(world.cells))]
-    D = trace_distances(traces, kind="edit", substitution_cost=2)
-    truth = world.truth().tensors["positions"]
-    mds, iso = classical_mds(D, 2).coordinates, isomap_coordinates(D)
-    return {
-        "seed": seed,
-        "barrier": barrier,
-        "mds": procrustes_error(truth, mds),
-        "isomap": procrustes_error(truth, iso),
-        "mds_scores": score_points(truth, mds),
-        "isomap_scores": score_points(truth, iso),
-    }
-
-
-def far_error(truth: np.ndarray, embedding: np.ndarray, far: np.ndarray) -> float:
-    """Mean |aligned - truth| over the `far` rows after a least-squares affine fit of the 1-D
-    embedding onto the 1-D truth over all rows (in the truth's units)."""
-    t, e = np.asarray(truth, dtype=np.float64).reshape(-1), np.asarray(embedding, dtype=np.float64).reshape(-1)
-    A = np.c_[e, np.ones_like(e)]
-    coef, *_ = np.linalg.lstsq(A, t, rcond=None)
-    return float(np.abs(A @ coef - t)[far].mean())
-
-
-def substep_offset(d: np.ndarray, g: int) -> float:
-    """Where between vergence steps the minimum of d lies, from the states seen around the end of
-    the trace: the vertex of the parabola through d(g-1), d(g), d(g+1), in steps (|offset| <= 0.5)."""
-    if g < 1 or g + 1 >= d.size:
-        return 0.0
-    a, b, c = float(d[g - 1]), float(d[g]), float(d[g + 1])
-    den = a - 2 * b + c
-    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den > 0 else 0.0
-
-
-def state_aided_job(n_starts: int = 20) -> dict:
-    """Vergence traces of ch. 7 (the perfect policy: converge to the perceptual goal) against the
-    same traces aided by state (9.5). Plain: indel edit distance of the actions, i.e. differences of
-    trace lengths, which alias at far depths where several starts share a goal step. State-aided:
-    the trace length refined by the foveal differences d (Eq 7.2) seen at the trace's end - one step
-    before, at, and one probe step past the goal - as the parabola's vertex (`substep_offset`)."""
-    from sensorimotor.worlds.vergence import VergenceWorld
-
-    w = VergenceWorld(seed=0, n_starts=n_starts)
-    try:
-        goals, offsets = [], []
-        for st in range(w.spec().n_starts):
-            w.reset(start=st)
-            d = w.differences(range(max(w.goal - 1, 0), w.goal + 2))
-            goals.append(w.goal)
-            offsets.append(substep_offset(np.r_[np.zeros(max(w.goal - 1, 0)), d], w.goal))
-        truth = w.truth().tensors["positions"][:, 0]
-    finally:
-        w.close()
-    D_plain = trace_distances([[0] * g for g in goals], kind="edit", substitution_cost=2)
-    refined = np.asarray(goals, dtype=np.float64) + np.asarray(offsets)
-    D_aided = np.abs(refined[:, None] - refined[None, :])
-    far = np.argsort(-np.asarray(truth))[len(truth) // 2 :]  # the smaller angles: the farther half
-    out: dict[str, Any] = {
-        "n_starts": n_starts,
-        "aliased_far_starts": int(len(far) - len({goals[i] for i in far})),
-    }
-    for name, D in (("plain", D_plain), ("state_aided", D_aided)):
-        X = classical_mds(D, 1).coordinates
-        out[name] = {
-            "procrustes": procrustes_error(truth, X),
-            "far_error_rad": far_error(truth, X, far),
-            "scores": score_points(truth, X),
-        }
-    return out
-
+__all__ = [
+    "AGENTS",
+    "OUTCOMES",
+    "GridTable",
+    "OptionCurve",
+    "ProbabilisticResult",
+    "chapter",
+    "far_error",
+    "greedy_steps",
+    "greedy_trace",
+    "isomap_coordinates",
+    "isomap_job",
+    "mountaincar_traces",
+    "option_world",
+    "options_job",
+    "policy_map_job",
+    "probabilistic_gridworld",
+    "probabilistic_job",
+    "state_aided_job",
+    "substep_offset",
+    "train_lspi_gridworld",
+    "train_mountaincar",
+    "train_options_agent",
+]
 
 # --- sme reproduce chapter9 -------------------------------------------------------------------------
 

@@ -339,3 +339,114 @@ def chapter(runs: int, quick: bool, workers: int, out: str) -> dict:
             vline=morph_at,
         )
     return {"results": res, "finals": finals, "ci95": ci, "welch_p": tests, "live": live, "markdown": "\n".join(lines)}
+
+
+# --- `sme reproduce mountaincar-ablation`: where the embedding agent loses to the true-state agent --
+
+#: each stage of the embedding agent and what replaces it with its true-state counterpart (one at a time);
+#: "none" and "steps" are the same runs (the first `train` car steps of runs twice as long)
+ABLATIONS: dict[str, str] = {
+    "none": "none: the embedding agent as it ships",
+    "position": "position: the true x (mapped affinely onto the embedding's axis) instead of the vergence reading",
+    "velocity": "velocity: the true v (same map) instead of the Kalman filter's estimate",
+    "tiles": "tile coding: the true-state agent's box (x in [-2, 2], abs(v) <= 0.07, mapped) instead of the embedding's",
+    "steps": "training steps: twice as many, scored at the end of those",
+    "state": "position and velocity both true (the tile box still the embedding's)",
+}
+
+
+def _ablated_program(world: Any, swap: str, seed: int, eval_every: int, **params: Any) -> Any:
+    """The mountain-car program with stage `swap` given its true-state counterpart; the truth comes
+    from `world` (in process), mapped onto the embedding's axis by the affine fit of the first
+    embedding's coordinates to the sweep states' true x."""
+    from sensorimotor.agent.programs.mountaincar import MountainCarProgram
+
+    class Ablated(MountainCarProgram):
+        def _make_driver(self, lo: float, hi: float) -> None:
+            assert self._coords0 is not None
+            xs = world.starts[: self.n_positions, 0]
+            self.map_a, self.map_b = (float(c) for c in np.polyfit(xs, self._coords0[:, 0], 1))
+            super()._make_driver(lo, hi)
+            if swap == "tiles":
+                prm, a, b = world.car, self.map_a, self.map_b
+                ends = sorted((a * prm.x_min + b, a * prm.x_max + b))
+                vmax = abs(a) * prm.v_max
+                coder = TileCoder(
+                    [ends[0], -vmax], [ends[1], vmax], tiles=self.params.tiles, n_tilings=self.params.n_tilings
+                )
+                assert self.sarsa is not None
+                self.sarsa = self._sarsa(coder, self.sarsa.seed)
+
+        def _car_state(self, p: float, first: bool) -> np.ndarray:
+            a, b = self.map_a, self.map_b
+            if swap == "position":
+                return super()._car_state(a * world.x + b, first)
+            if swap == "state":
+                return np.array([a * world.x + b, a * world.v])
+            s = super()._car_state(p, first)
+            if swap == "velocity":
+                s[1] = a * world.v
+            return s
+
+    return lambda spec, seed=seed: Ablated(spec, seed=seed, eval_every=eval_every, **params)
+
+
+def ablated(seed: int, swap: str, train: int, every: int, n_eval: int, baseline: float = 1.0) -> dict:
+    """One seeded run of the embedding agent on `baseline` with stage `swap` swapped (ABLATIONS)."""
+    from sensorimotor.tools.inprocess import run_inprocess
+    from sensorimotor.worlds.mountaincar import MountainCarWorld
+
+    if swap not in ABLATIONS:
+        raise ValueError(f"unknown ablation {swap!r}; choose one of {', '.join(ABLATIONS)}")
+    train = 2 * train if swap == "steps" else train
+    world = MountainCarWorld(seed=seed, baseline=baseline, n_eval=n_eval)
+    prog = _ablated_program(world, swap, seed, every)(world.spec())
+    with world:
+        run = run_inprocess(world, prog, 10**10, stop_when=lambda r: len(prog.curve) >= train // every)
+    return {"swap": swap, "seed": seed, "curve": list(prog.curve), "world_steps": run.steps, "seconds": run.seconds}
+
+
+def ablation(runs: int, quick: bool, workers: int, out: str, baseline: float = 1.0) -> dict:
+    """Each stage of the embedding agent swapped for its true-state counterpart, one at a time, on
+    the same seeds as the true-state agent; the steps to goal at the end (the mean of the last
+    three evaluations, as the chapter scores) and what each swap closes of the gap."""
+    train, every, n_eval = (20_000, 10_000, 20) if quick else (100_000, 10_000, 100)
+    jobs: list[tuple[Any, ...]] = [(s, "steps", train, every, n_eval, baseline) for s in range(runs)]
+    jobs += [
+        (s, k, train, every, n_eval, baseline) for k in ABLATIONS if k not in ("none", "steps") for s in range(runs)
+    ]
+    res = pool_map(ablated, jobs, workers)
+    true = [
+        float(np.mean([m for _, m in r.curve[-3:]])) for r in (true_state(s, train, every, n_eval) for s in range(runs))
+    ]
+
+    def final(curve: list) -> float:  # the end of training: the mean of the last three evaluations
+        return float(np.mean([m for _, m in curve[-3:]]))
+
+    finals = {k: [final(r["curve"]) for r in res if r["swap"] == k] for k in ABLATIONS if k != "none"}
+    finals["none"] = [final(r["curve"][: train // every]) for r in res if r["swap"] == "steps"]
+    t = float(np.mean(true))
+    gap = float(np.mean(finals["none"])) - t
+    lines = [
+        f"Mountain car ablation (ch. 8), baseline {baseline} m: {runs} seeded runs per row (seeds 0..{runs - 1}, "
+        f"the same seeds in every row); {train} training car steps, evaluated every {every} on {n_eval} fixed "
+        "random states; steps to goal at the end = the mean of the last three evaluations (lower is better). "
+        "One stage at a time is given its true-state counterpart; 'paired' is the mean over seeds of "
+        "(row - as shipped), with its 95 % CI. The as-shipped row is the first half of the twice-as-long runs "
+        "(the same program and seed; seconds: those runs').",
+        "",
+        "| stage swapped for the true state | steps to goal at the end | vs true state | paired change vs as shipped "
+        "| share of the gap closed | mean seconds per run |",
+        "|---|---|---|---|---|---|",
+    ]
+    for k, label in ABLATIONS.items():
+        diffs = np.array(finals[k]) - np.array(finals["none"])
+        secs = np.mean([r["seconds"] for r in res if r["swap"] == ("steps" if k == "none" else k)])
+        d = ci95(list(diffs)) if k != "none" else None
+        share = f"{-float(np.mean(diffs)) / gap:.0%}" if k != "none" and gap > 0 else ""
+        lines.append(
+            f"| {label} | {fmt(ci95(finals[k]), 1)} | {np.mean(finals[k]) / t:.2f}x | "
+            f"{fmt(d, 1) if d else ''} | {share} | {secs:.0f} |"
+        )
+    lines.append(f"| the true-state agent (Sarsa on (x, v) itself) | {fmt(ci95(true), 1)} | 1.00x |  |  |  |")
+    return {"results": res, "finals": finals, "true": true, "markdown": "\n".join(lines)}

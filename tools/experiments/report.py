@@ -98,6 +98,52 @@ def _lower(a: tuple[float, float], b: tuple[float, float], what: str) -> tuple[s
     return NOT_MET, f"{what}: not lower"
 
 
+@dataclass(frozen=True)
+class Paired:
+    """A paired comparison of two conditions run on the same seeds: the mean of the per-seed
+    differences a - b with its 95 % t interval, the paired t-test's p and the Wilcoxon signed-rank
+    test's p (both for `alternative`: "less" = a below b, "two-sided")."""
+
+    n: int
+    diff: float
+    half: float
+    p_t: float
+    p_wilcoxon: float
+
+    def text(self, alternative: str) -> str:
+        side = "one-sided" if alternative != "two-sided" else "two-sided"
+        return (
+            f"paired t-test over {self.n} seeds, {side} p = {self.p_t:.3g} (Wilcoxon signed-rank p = "
+            f"{self.p_wilcoxon:.3g}); mean difference {self.diff:.4g} ± {self.half:.2g}"
+        )
+
+
+def paired(a: Sequence[float], b: Sequence[float], alternative: str = "less") -> Paired:
+    """Paired tests of `a` against `b` (index i of both is the same seed); NaN p with fewer than 2
+    pairs or no differences at all."""
+    from scipy import stats
+
+    x, y = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if x.shape != y.shape:
+        raise ValueError(f"paired samples differ in length: {x.size} and {y.size}")
+    d = x - y
+    m, h = ci95(d) if d.size else (float("nan"), float("nan"))
+    if d.size < 2 or not np.any(d != 0):
+        return Paired(int(d.size), m, h, float("nan"), float("nan"))
+    p_t = float(stats.ttest_rel(x, y, alternative=alternative).pvalue)
+    p_w = float(stats.wilcoxon(x, y, alternative=alternative).pvalue)
+    return Paired(int(d.size), m, h, p_t, p_w)
+
+
+def _paired_lower(a: Sequence[float], b: Sequence[float], what: str, alpha: float = 0.05) -> tuple[str, str]:
+    """Met when condition `a` is below `b` on the same seeds: the one-sided paired t-test's p < alpha
+    (the Wilcoxon p is given beside it)."""
+    t = paired(a, b, "less")
+    if t.p_t == t.p_t and t.p_t < alpha:
+        return MET, f"{what}: {t.text('less')}"
+    return NOT_MET, f"{what}: not shown ({t.text('less')}; met: p < {alpha})"
+
+
 def _quick(quick: bool, ours: str, full: str) -> str:
     return f" (quick run: {ours}; the dissertation: {full})" if quick else ""
 
@@ -117,7 +163,9 @@ def rows_gridworld(res: dict[str, Any], quick: bool) -> list[Row]:
             "plain: Procrustes error, first → last LSPI embedding",
             f"{fmt(first, 4)} → {fmt(final['plain'], 4)}",
             "falls as LSPI iterates (Fig 5.4)",
-            *_lower(final["plain"], first, "last below first"),
+            *_paired_lower(
+                [r["errors"][-1] for r in by["plain"]], [r["errors"][0] for r in by["plain"]], "last below first"
+            ),
         )
     ]
     ratio = final["barrier"][0] / max(final["plain"][0], 1e-12)
@@ -163,17 +211,72 @@ def rows_retina(res: dict[str, Any], quick: bool) -> list[Row]:
     note = _quick(quick, f"{steps} training saccades", "5000")
     v, why = _at_most(one, 5.0, tol=0.2)
     out = [Row(f"1-saccade error after {steps} saccades (px)", fmt(one, 2), "about 5 px after 5000", v, why + note)]
-    out.append(Row("2-saccade error (px)", fmt(two, 2), "lower than 1 saccade", *_lower(two, one, "2 below 1 saccade")))
-    v, why = _lower(end["basic"], end["robust"], "basic below robust")
-    out.append(
-        Row(
-            "lesion: greedy post-saccade activation at the end, basic vs robust rule",
-            f"basic {fmt(end['basic'], 1)} / robust {fmt(end['robust'], 1)}",
-            "the robust rule recovers, the basic does not (Fig 4.4)",
-            v,
-            why,
+    v, why = _paired_lower([r["two"][-1] for r in learning], [r["one"][-1] for r in learning], "2 below 1 saccade")
+    out.append(Row("2-saccade error (px)", fmt(two, 2), "lower than 1 saccade", v, why))
+    ls = res.get("lesion_summary") or {}
+    if "basic" in ls and "robust" in ls:  # Fig 4.4: what the lesion did to each rule, paired by seed
+        rb, rr = ls["basic"]["rise"], ls["robust"]["rise"]
+        v, why = _paired_lower(rb, rr, "the basic rule's recovery below the robust rule's")
+        gap_before = float(np.mean(ls["robust"]["last_before"]) - np.mean(ls["basic"]["last_before"]))
+        gap_end = float(np.mean(ls["robust"]["end"]) - np.mean(ls["basic"]["end"]))
+        why += (
+            f". At the end robust {fmt(ci95(ls['robust']['end']), 1)} vs basic {fmt(ci95(ls['basic']['end']), 1)}: "
+            f"{gap_end:+.1f}, of which {gap_before:+.1f} was there before the lesion"
         )
-    )
+        ar = ls["basic"].get("arithmetic")
+        if ar:
+            why += (
+                f". The lesion lowers the best activation from {ar['best_before']:.0f} to {ar['best_after']:.0f} "
+                f"(target on the centre: {ar['centre_after']:.0f}); the basic rule updates a field only when R > R_k, "
+                f"and at the lesion {100 * float(np.mean(ls['basic']['frozen_weight'])):.0f} % of its steering weight "
+                "had R_k above that best: the rest still learns (docs/reproduce.md, Fig 4.4)"
+            )
+        out.append(
+            Row(
+                "lesion (Fig 4.4): recovery of the greedy post-saccade activation after the lesion (end minus "
+                "just after it), basic vs robust rule",
+                f"basic {fmt(ci95(rb), 1)} / robust {fmt(ci95(rr), 1)}",
+                "the robust rule recovers, the basic does not: a clear separation",
+                v,
+                why,
+            )
+        )
+        iso = res.get("lesion_isolating_summary") or {}
+        if "basic" in iso and "robust" in iso:  # the premise of 4.4.2 made to hold: estimates above the best left
+            ib, ir = iso["basic"]["rise"], iso["robust"]["rise"]
+            v, why = _paired_lower(ib, ir, "the basic rule's recovery below the robust rule's")
+            ar = iso["basic"].get("arithmetic")
+            if ar:
+                why += (
+                    f". A retina started from its true saccades, a lesion of {ar['lesioned_fields']} fields that "
+                    f"leaves a best activation of {ar['best_after']:.0f} (of {ar['best_before']:.0f}): "
+                    f"{100 * float(np.mean(iso['basic']['frozen_weight'])):.0f} % of the basic rule's steering weight "
+                    f"has R_k above it; target moved {np.mean(iso['basic']['landing_shift_u']):+.1f} px (basic) / "
+                    f"{np.mean(iso['robust']['landing_shift_u']):+.1f} px (robust) from the lesion, the best spot "
+                    f"{ar['best_offset_after'][0]:+.0f} px"
+                )
+            out.append(
+                Row(
+                    "lesion, 4.4.2's premise isolated (the best activation left below the reward estimates): "
+                    "recovery basic vs robust",
+                    f"basic {fmt(ci95(ib), 1)} / robust {fmt(ci95(ir), 1)}",
+                    "the basic rule makes no updates (R < R_k), the robust one recovers",
+                    v,
+                    why,
+                )
+            )
+    else:  # results from before the lesion summary: the activations at the end
+        ends = {rule: [float(np.mean(r["activation"][-4:])) for r in lesion if r["rule"] == rule] for rule in end}
+        v, why = _paired_lower(ends["basic"], ends["robust"], "basic below robust")
+        out.append(
+            Row(
+                "lesion: greedy post-saccade activation at the end, basic vs robust rule",
+                f"basic {fmt(end['basic'], 1)} / robust {fmt(end['robust'], 1)}",
+                "the robust rule recovers, the basic does not (Fig 4.4)",
+                v,
+                why,
+            )
+        )
     detected = [d for d in delays if d is not None]
     out.append(
         Row(
@@ -212,20 +315,62 @@ def rows_rovingeye(res: dict[str, Any], quick: bool) -> list[Row]:
         e = res["errors"][m]
         v, why = _at_most((e["mean"], e["ci95"]), float(target))
         out.append(Row(f"Table 5.1 Procrustes error, {m}", fmt((e["mean"], e["ci95"]), 3), f"{target}", v, why))
+    const, fit = res.get("score_constants"), res.get("score_fit")
     for m, target in res["dissertation"]["scores"].items():
         sc = res["scores"][m]
-        v, why = _at_least((sc["mean"], sc["ci95"]), float(target))
-        out.append(Row(f"Table 5.1 score, {m}", fmt((sc["mean"], sc["ci95"]), 3), f"{target}", v, why))
-    out.append(
-        Row(
-            "better policies give better embeddings (error ordering)",
-            str(res["ordering_holds"]),
-            "sensor > gradient > ε-gradient > hand-coded > ballistic",
-            MET if res["ordering_holds"] else NOT_MET,
-            "the mean errors in that order",
+        why = (
+            "ch. 5.2 defines the score (a reward on termination from the distance to the goal, discounted by the "
+            "number of actions) but gives neither the reward scale nor the discount"
         )
-    )
+        if const:
+            why += f"; ours: exp(-d / {const['reward_px']:g} px) x {const['discount']:g}^actions"
+        if fit:
+            why += (
+                f"; no constants recover theirs (the closest, {fit['reward_px']:.1f} px and {fit['discount']:.3f}, "
+                f"still differ by RMS {fit['rms']:.2f} over the four)"
+            )
+        out.append(Row(f"Table 5.1 score, {m}", fmt((sc["mean"], sc["ci95"]), 3), f"{target}", NOT_COMPARABLE, why))
+    out.append(_ordering_row(res, "errors", "better policies give better embeddings (errors fall in order)", False))
+    if all("per_seed" in res["scores"][m] for m in res["dissertation"]["scores"]):
+        row = _ordering_row(res, "scores", "scores rise as errors fall (Table 5.1's order)", True)
+        if fit:
+            row = Row(
+                row.measure,
+                row.ours,
+                row.dissertation,
+                row.verdict,
+                row.why
+                + f"; the order holds under {100 * fit['rising_share']:.0f} % of other constants ({fit['grid']})",
+            )
+        out.append(row)
     return out
+
+
+def _ordering_row(res: dict[str, Any], key: str, measure: str, rising: bool) -> Row:
+    """Table 5.1's methods in the dissertation's order: each step met by a one-sided paired t-test
+    over the seeds (the methods run on the same points of each seed)."""
+    names = [m for m in ("sensor_mds", "gradient", "epsilon_gradient", "hand_coded", "ballistic") if m in res[key]]
+    steps = []
+    ok = True
+    for a, b in zip(names, names[1:], strict=False):
+        lo, hi = (
+            (res[key][a]["per_seed"], res[key][b]["per_seed"])
+            if rising
+            else (res[key][b]["per_seed"], res[key][a]["per_seed"])
+        )
+        t = paired(lo, hi, "less")
+        good = t.p_t == t.p_t and t.p_t < 0.05
+        ok &= good
+        steps.append(f"{a} {'<' if rising else '>'} {b}: p = {t.p_t:.2g}")
+    means = " < ".join if rising else " > ".join
+    return Row(
+        measure,
+        means(f"{res[key][m]['mean']:.3g}" for m in names),
+        " < ".join(names) if rising else " > ".join(names),
+        MET if ok else NOT_MET,
+        "each step by a one-sided paired t-test over the seeds (same points per seed; met: every p < 0.05): "
+        + "; ".join(steps),
+    )
 
 
 def rows_objectpose(res: dict[str, Any], quick: bool) -> list[Row]:
@@ -283,9 +428,33 @@ def rows_vergence(res: dict[str, Any], quick: bool) -> list[Row]:
                     "met: at least 90 % of starts",
                 )
             )
+        if perfect_in is None:  # the stereo pair: every run, against the dataset's disparities
+            per_run = [float(r["errors"][-1]) for r in rs]
+            off = np.concatenate([np.asarray(r["goal_minus_truth"], dtype=np.float64) for r in rs[:1]])
+            ok = max(per_run) <= STEREO_BAR
+            truth = rs[0].get("truth")
+            span = f", over disparities of {min(truth):.0f}-{max(truth):.0f} px" if truth else ""
+            out.append(
+                Row(
+                    "stereo: Procrustes error of the depth map, every run",
+                    f"{fmt(err, 4)} (per run {', '.join(f'{e:.4f}' for e in per_run)})",
+                    f"{proc}",
+                    MET if ok else NOT_MET,
+                    f"{'every' if ok else 'not every'} run at most {STEREO_BAR} against the Middlebury 2014 ground-truth "
+                    "disparities that scikit-image ships (motorcycle, down-sampled by 4). The dissertation's 0.0003 is on "
+                    "a Middlebury pair it does not name, at its resolution: the error is the squared residual over the "
+                    "spread of the disparities, and ours is the perceptual goals' offset from the truth "
+                    f"({np.sqrt(np.mean(off**2)):.2f} px rms, at most {np.abs(off).max():.1f} px{span}), the same in every run",
+                )
+            )
+            continue
         v, why = _at_most(err, proc)
         out.append(Row(f"{w}: Procrustes error of the depth map", fmt(err, 4), f"{proc}", v, why))
     return out
+
+
+#: the stereo pair's bar per run (issue 38): the dissertation's 0.0003 was on another pair
+STEREO_BAR = 0.01
 
 
 def _ratio_ci(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float]:
@@ -308,11 +477,16 @@ def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
         why = f"{r:.2f}x the true-state agent (met: within 1.2x)"
         if len(finals.get(k, [])) > 1 and len(finals.get("true", [])) > 1:
             r, lo, hi = _ratio_ci(finals[k], finals["true"])
-            p = float(stats.ttest_ind(finals[k], finals["true"], equal_var=False).pvalue)
             over = f"; {r - 1.2:.2f}x above the bound" if r > 1.2 else ""
+            same = len(finals[k]) == len(finals["true"])  # the same seeds: a paired test
+            p = (
+                paired(finals[k], finals["true"], "two-sided").p_t
+                if same
+                else float(stats.ttest_ind(finals[k], finals["true"], equal_var=False).pvalue)
+            )
             why = (
                 f"{r:.2f}x the true-state agent, 95 % CI of the ratio {lo:.2f}-{hi:.2f} (met: within 1.2x){over}; "
-                f"Welch p vs the true-state agent {p:.3f}"
+                f"{'paired t' if same else 'Welch'} p vs the true-state agent {p:.3f}"
             )
         out.append(
             Row(
@@ -324,10 +498,14 @@ def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
             )
         )
     for pair, p in res["welch_p"].items():
+        a, _, b = pair.partition(" vs ")
+        test = "Welch t-test"
+        if len(finals.get(a, [])) == len(finals.get(b, [])) > 1:  # the same seeds: a paired test
+            p, test = paired(finals[a], finals[b], "two-sided").p_t, "paired t-test (same seeds)"
         comparable = p == p  # NaN with one run
         out.append(
             Row(
-                f"bodies {pair}: Welch t-test",
+                f"bodies {pair}: {test}",
                 "n/a" if not comparable else f"p = {p:.3f}",
                 "no significant difference",
                 (MET if p > 0.05 else NOT_MET) if comparable else NOT_COMPARABLE,
@@ -353,7 +531,7 @@ def rows_chapter9(res: dict[str, Any], quick: bool) -> list[Row]:
     out = []
     for other in ("none", "random"):
         o = (st[other]["mean"], st[other]["ci95"])
-        v, why = _lower(disc, o, f"discovered options below {other}")
+        v, why = _paired_lower(st["discovered"]["runs"], st[other]["runs"], f"discovered options below {other}")
         out.append(
             Row(
                 f"options: training steps to the level, discovered vs {other}",
