@@ -49,6 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--change", choices=sorted(CHANGES), default="reverse", help="learn: the body change made once learned"
     )
     p.add_argument("--learn-rate", type=float, default=50.0, help="learn: the stand-in's rate, Hz (default 50)")
+    p.add_argument("--change-at", type=int, default=3000, help="learn: make the change once this many steps are taken")
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
     p.set_defaults(func=main_args)
 
@@ -221,7 +222,26 @@ def _tell_robot(endpoint: str, text: str) -> None:
         time.sleep(0.5)
 
 
-def learn_one(kind: str, seed: int, timeout: float, rate: float = 50.0, change: str = "reverse") -> dict[str, Any]:
+def _world_steps(ep: str, wid: str) -> int:
+    """Steps the agent has taken in world `wid` (0 while it does not answer)."""
+    from sensorimotor.protocol import codec, keys
+    from sensorimotor.protocol.bus import Bus, BusConfig, BusError
+    from sensorimotor.protocol.messages import AgentStatus
+
+    try:
+        with Bus(BusConfig.for_role("tool", ep)) as bus:
+            r = bus.get(keys.agent_status("a0"), timeout=2.0)
+    except BusError:
+        return 0
+    if not r:
+        return 0
+    st = codec.decode(AgentStatus, r[0].payload)
+    return next((ln.steps for ln in st.links if ln.world_id == wid), 0)
+
+
+def learn_one(
+    kind: str, seed: int, timeout: float, rate: float = 50.0, change: str = "reverse", change_at: int = 3000
+) -> dict[str, Any]:
     """One seeded run through `sme world arm` (kind ``native``) or the stand-in + `sme world ros2`."""
     procs: list[subprocess.Popen] = []
     out: dict[str, Any] = {"world": kind, "seed": seed}
@@ -267,6 +287,8 @@ def learn_one(kind: str, seed: int, timeout: float, rate: float = 50.0, change: 
             out["error"] = first["procrustes_error"] if first else None
             if first is None:
                 return out
+            _until(lambda: _world_steps(ep, wid) >= change_at, timeout)  # the same step in both runs
+            out["change_at_step"] = _world_steps(ep, wid)
             n0 = len(rows)
             if perturb is not None:
                 pert = _py("-m", "sensorimotor.tools.cli", "perturb", *perturb, "--world", wid, "--connect", ep)
@@ -277,8 +299,6 @@ def learn_one(kind: str, seed: int, timeout: float, rate: float = 50.0, change: 
                 out["change"] = f"on the robot: {robot_change}"
             relearned = _until(lambda: next((r for r in rows[n0:] if r.get("trigger") == "relearned"), None), timeout)
             drop = next((r for r in rows[n0:] if r.get("kind") == "drop_detected"), None)
-            learned_at = max((r.get("step") or 0) for r in rows[:n0])
-            out["last_step_before_change"] = learned_at
             out["drop_step"] = drop["step"] if drop else (relearned or {}).get("drop_step")
             out["relearned_step"] = relearned["step"] if relearned else None
             out["relearned_error"] = relearned["procrustes_error"] if relearned else None
@@ -298,7 +318,10 @@ def main_args(args: argparse.Namespace) -> int:
     if args.what == "throughput":
         res: Any = throughput(args.ticks, args.rate, args.camera_seconds)
     else:
-        res = [learn_one(k, args.seed, args.timeout, args.learn_rate, args.change) for k in ("native", "ros2")]
+        res = [
+            learn_one(k, args.seed, args.timeout, args.learn_rate, args.change, args.change_at)
+            for k in ("native", "ros2")
+        ]
     text = json.dumps(res, indent=2)
     print(text)
     if args.json:
