@@ -433,7 +433,7 @@ def render_life(src: Any, text: str) -> str:
     """The docs' table of the life of changes: one row per world and seed."""
     rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
     out = [
-        "| world | seed | changes | noticed | relearned | steps to relearn: first | last | last / first "
+        "| world | seed | changes | noticed | relearned | steps from noticed to relearned: first | last | last / first "
         "| median delay (steps) | RSS at the first change | growth to the end | versions not rising |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]

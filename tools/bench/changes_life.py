@@ -5,7 +5,7 @@ other, each once the change before was relearned (a relearned version published)
 warmed up again, or its budget ran out. Odd changes are drawn by the seed from the kinds that break
 a learned policy and can be relearned (reverse, every action moved one place on or back); even ones
 are `restore` (the body as it was: a change too, which the policy relearned for the other body
-does not survive). Per change: detection delay, steps to the relearned map and its error; per run:
+does not survive). Per change: detection delay, steps from the detection to the relearned map and its error; per run:
 changes detected, the last change's steps to relearn over the first's, the process's RSS growth
 from the first change to the end, and embedding versions that did not rise."""
 
@@ -52,7 +52,10 @@ class LifeChange:
 
     @property
     def to_relearn(self) -> int | None:
-        return None if self.relearned is None else self.relearned - self.at
+        """Steps from the drop detected to the relearned map: how fast the agent relearns, apart from
+        how long the change waited for a sweep to show it (`delay`, which depends on where in the
+        program's cycle of exploring and sweeping the change came)."""
+        return None if self.relearned is None or self.detected is None else self.relearned - self.detected
 
 
 @dataclass(frozen=True)
@@ -187,7 +190,7 @@ def main(n: int, only: list[str] | None, seeds: int, json_out: bool, quick: bool
                 for i, c in enumerate(r["per_change"], 1):
                     print(
                         f"{r['world']} seed {s} change {i:2d} {c['kind']} {c['params']}: at {c['at']}, "
-                        f"noticed after {c['delay']} steps, relearned after {c['to_relearn']} steps "
+                        f"noticed after {c['delay']} steps, relearned {c['to_relearn']} steps after that "
                         f"(error {c['relearned_error']}), RSS {c['rss_mb']} MB"
                     )
                 print(
