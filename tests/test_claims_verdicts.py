@@ -5,6 +5,7 @@ and its one action, the vergence program's acceptance of a sweep's map, and the 
 import numpy as np
 import pytest
 
+from sensorimotor.agent.programs.acceptance import Score
 from sensorimotor.agent.programs.vergence import VergenceProgram
 from sensorimotor.protocol.messages import Control, EventKind
 from sensorimotor.tools.experiments import report
@@ -163,6 +164,11 @@ def test_vergence_program_does_not_publish_a_worse_policys_map():
     assert hasattr(first, "coordinates") and not hasattr(second, "coordinates")
     assert second.values["accepted"] == 0.0 and second.values["policy_success"] < first.metrics["policy_success"]
     assert "not accepted" in second.detail and len(run.embeddings) == 1
+    # the accepted score survives a snapshot, also when no trace reached the goal (length inf)
+    p._accepted = Score(0.0, float("inf"), 30)
+    twin = VergenceProgram(w.spec(), seed=5)
+    twin.restore(p.state())
+    assert twin._accepted == p._accepted and p.state()["accepted"] == [0.0, None, 30]
 
 
 def test_the_default_lesion_moves_the_best_saccade_off_the_centre():

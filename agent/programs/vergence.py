@@ -10,8 +10,9 @@ lengths, Eq 7.3), classical MDS to 1-D.
 
 Which policy's map is published (`accept`, on by default): a sweep is scored without truth by the
 fraction of its traces that reached the goal and their mean length (`acceptance.sweep_score`); a
-policy that does worse than the accepted one is not embedded, and the policy's map stays the published one (an event says so; LSPI keeps iterating). LSPI over the foveal difference alone can fall from
-a perfect policy to one that oscillates from a few starts (d is aliased: one d at many vergences);
+policy that does worse than the accepted one is not embedded, and the accepted policy's map stays
+the published one (an event says so; LSPI keeps iterating). LSPI over the foveal difference alone
+can fall from a perfect policy to one that oscillates from a few starts (d is aliased: one d at many vergences);
 one trace that never reaches the goal is 100 actions long and throws the whole 1-D map off
 (Procrustes 0.5-1.0 instead of 0.002 on the stereo pair), so that map is not the agent's best.
 """
@@ -71,6 +72,10 @@ def embed_job(traces: list[list[int]]) -> dict[str, Any]:
     run off the act path."""
     mds = classical_mds(trace_distances(traces, kind="edit", substitution_cost=2), 1)
     return {"coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 class VergencePractice:
@@ -315,7 +320,8 @@ class VergenceProgram(Program):
             "pending_embedding": None if self._pending_embedding is None else dict(self._pending_embedding),
             "accepted": None
             if self._accepted is None
-            else [self._accepted.fraction, self._accepted.length, self._accepted.traces],
+            # no trace reached the goal: length inf, saved as None (checkpoints hold finite numbers)
+            else [self._accepted.fraction, _finite_or_none(self._accepted.length), self._accepted.traces],
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -329,7 +335,11 @@ class VergenceProgram(Program):
         pending = state.get("pending_embedding")
         self._pending_embedding = None if pending is None else dict(pending)
         acc = state.get("accepted")  # absent in snapshots from before acceptance
-        self._accepted = None if acc is None else Score(float(acc[0]), float(acc[1]), int(acc[2]))
+        self._accepted = (
+            None
+            if acc is None
+            else Score(float(acc[0]), float("inf") if acc[1] is None else float(acc[1]), int(acc[2]))
+        )
 
     def world_restarted(self) -> None:
         """Drop the pending sample and restart the trace in progress."""
