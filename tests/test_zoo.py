@@ -17,7 +17,7 @@ from sensorimotor.agent.programs.goal import failed, reached
 from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol import codec
 from sensorimotor.protocol.errors import ProtocolError
-from sensorimotor.protocol.messages import ActionSpace, GoalRule, Observation, SensorSpec, WorldSpec
+from sensorimotor.protocol.messages import ActionSpace, EventKind, GoalRule, Observation, SensorSpec, WorldSpec
 from sensorimotor.protocol.params import ParamError
 from sensorimotor.tools.experiments.repeatable import check
 from sensorimotor.tools.inprocess import run_inprocess
@@ -95,8 +95,9 @@ def test_action_scale_narrows_the_discretised_moves_about_the_middle_of_the_box(
     assert full.shape == half.shape == (9, 2)
     assert sorted(set(full[:, 1])) == [0.0, 2.0, 4.0] and sorted(set(half[:, 0])) == [-0.5, 0.0, 0.5]
     assert sorted(set(half[:, 1])) == [1.0, 2.0, 3.0]  # about the middle, not about zero
+    assert np.array_equal(make_program(spec, 0, action_scale=0.0).actions, full)  # 0: whole until measured
     with pytest.raises(ParamError, match="action_scale"):
-        make_program(spec, 0, action_scale=0.0)
+        make_program(spec, 0, action_scale=-0.5)
 
 
 def test_dict_observations_lose_only_what_cannot_be_flattened():
@@ -495,3 +496,20 @@ def test_convergence_is_a_goal_from_90_percent_of_starts_or_a_policy_the_program
     assert post_convergence(settled, []) == (1, 2.5)
     assert post_convergence(settled, [1]) == (0, None)  # after a detected drop: not counted
     assert post_convergence([v(1, 0.2, 0.95), v(2, 0.29, 0.8)], []) == (0, pytest.approx(1.45))
+
+
+def test_at_the_defaults_a_body_whose_moves_add_up_is_mapped_by_net_moves_of_whole_moves():
+    """`distance=auto`, `action_scale=0` (the defaults): a spot moved exactly 0.05 x the command
+    keeps whole moves (its warm-up's steps are the moves sent) and, once a sweep shows where traces
+    end is linear in their summed moves, is mapped by net moves (`agent.programs.box_moves`)."""
+    with make_world("gym:tests.spot_env:zoo-test/SpotState-v0", "spot", 0) as w:
+        program = make_program(w.spec(), 0, embed_every="1500")
+        run = run_inprocess(w, program, 8_000, stop_when=lambda r: len(r.embeddings) >= 2)
+    said = {e.reason: e.detail for e in run.events(EventKind.POLICY_ITERATION)}
+    assert "whole moves" in said["move_scale"] and "net_moves" in said, said
+    assert program._trace_distance() == "net" and float(np.abs(program.actions).max()) == 1.0
+    embs = [e for e in run.embeddings if e.procrustes_error is not None]
+    assert embs[-1].procrustes_error < 0.05, [e.procrustes_error for e in embs]
+    twin = make_program(w.spec(), 0, embed_every="1500")
+    twin.restore(program.state())
+    assert twin._trace_distance() == "net"

@@ -105,12 +105,12 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         self.params = prm = parse(GenericProgramParams, overrides, name=self.name, base=params)
         if not spec.sensors:
             raise SpecMismatch(f"generic program: world {spec.world_id} declares no sensors")
-        self.actions = action_table(spec, prm.action_levels, prm.action_scale)
+        self.actions = action_table(spec, prm.action_levels, prm.action_scale or 1.0)  # 0: whole until measured
         #: the stochastic-world estimator and traces per start in force (`auto` and 0 resolved)
         self.estimator = prm.estimator if prm.estimator != "auto" or spec.action_space.discrete else "mode"
         mean_trace = self.estimator in ("mean_trace", "auto")
         self.samples = prm.samples or (int(np.clip(768 // max(1, spec.n_starts), 8, 64)) if mean_trace else 8)
-        self._motor_actions = action_table(spec, prm.action_levels, prm.motor_scale or prm.action_scale)
+        self._motor_actions = action_table(spec, prm.action_levels, prm.motor_scale or prm.action_scale or 1.0)
         self.n_actions = self.actions.shape[0]
         self.discrete = spec.action_space.discrete
         self.goal = str(spec.goal)

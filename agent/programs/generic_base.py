@@ -367,5 +367,14 @@ class GenericBase(Program):
     def _model_step(self, obs: Observation, a: int | None) -> None:  # generic_continuous
         raise NotImplementedError
 
+    def _trace_distance(self, step: int | None = None) -> str:  # generic_continuous
+        raise NotImplementedError
+
+    def moves_state(self) -> dict[str, Any]:  # generic_continuous
+        raise NotImplementedError
+
+    def restore_moves(self, state: dict[str, Any] | None) -> None:  # generic_continuous
+        raise NotImplementedError
+
     def _learn_in_sweep(self, obs: Observation, a: int | None) -> None:  # generic_continuous
         raise NotImplementedError

@@ -1,6 +1,8 @@
 """The generic program's learners of continuous observations: tile-coded Sarsa(lambda), which learns
 on every step, and the model planner (over the observation, or over motor coordinates of camera
-frames fitted after a warm-up of random moves); both measure the observation's ranges first."""
+frames fitted after a warm-up of random moves); both measure the observation's ranges first. The
+planner's warm-up also measures how faithfully the body carries out its moves, and its sweeps
+whether the moves add up (`agent.programs.box_moves`: the move size and trace distance it picks)."""
 
 from __future__ import annotations
 
@@ -14,16 +16,29 @@ from sensorimotor.agent.learners.motor_map import MotorMap
 from sensorimotor.agent.learners.reach import ReachLearner, state_sensors
 from sensorimotor.agent.learners.reach import plan_job as reach_plan_job
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
-from sensorimotor.agent.programs.base import Decision
+from sensorimotor.agent.programs.base import Decision, EventOutput
+from sensorimotor.agent.programs.box_moves import move_scale, moves_add_up, probe_half_moves, unexplained
 from sensorimotor.agent.programs.generic_base import GenericBase
-from sensorimotor.agent.programs.generic_jobs import motor_job
+from sensorimotor.agent.programs.generic_jobs import action_table, motor_job
 from sensorimotor.agent.programs.goal import failed, reached
 from sensorimotor.protocol.errors import SpecMismatch
-from sensorimotor.protocol.messages import Observation
+from sensorimotor.protocol.messages import EventKind, Observation
 
 
 class GenericContinuous(GenericBase):
     """Sarsa(lambda) and the model planner: warm-ups, ranges, learning steps."""
+
+    #: the planner's warm-up, `action_scale=0`: its (move sent, displacement) steps, the step in
+    #: progress, the share a whole move left unexplained, and the half moves it probes (None: no probe)
+    _probe: list[tuple[np.ndarray, np.ndarray]] | None = None
+    _probe_prev: tuple[np.ndarray, np.ndarray] | None = None
+    _probe_whole: float | None = None
+    _half_actions: np.ndarray | None = None
+    #: `distance=auto` resolved (None: not yet; a box planner's sweeps decide, see `_trace_distance`)
+    _distance: str | None = None
+    _distance_now: str = "padded"
+    #: the fraction of each bound the plan's moves span now
+    _scale: float = 1.0
 
     def _init_sarsa(self, d: int) -> TabularBasis:
         """Tile-coded Sarsa(lambda) over `d` values, laid over the ranges the warm-up measures."""
@@ -53,8 +68,17 @@ class GenericContinuous(GenericBase):
         if self.motor:
             d = self.actions.shape[1]
             self._lo, self._span = np.zeros(d), np.ones(d)
+        self.planner = self._new_planner(d)
+        self._scale = prm.action_scale or 1.0
+        if prm.action_scale == 0 and not self.discrete and not self.motor and prm.sarsa_warmup >= 4:
+            self._probe, self._half_actions = [], action_table(self.spec, prm.action_levels, 0.5)
+        self._seen_lo, self._seen_hi, self._warm = np.full(d, np.inf), np.full(d, -np.inf), 0
+        return TabularBasis(1, self.n_actions), d  # the basis is unused: LSPI keeps the program's shape uniform
+
+    def _new_planner(self, d: int, seed: int | None = None) -> ModelPlanner:
+        prm = self.params
         grid = prm.planner_grid or max(2, min(16, int(np.floor(4096 ** (1.0 / d) + 1e-9))))
-        self.planner = ModelPlanner(
+        return ModelPlanner(
             d,
             self.actions,
             self.discrete,
@@ -62,10 +86,8 @@ class GenericContinuous(GenericBase):
             gamma=prm.sarsa_gamma,
             epsilon=prm.planner_epsilon,
             effort=prm.planner_effort,
-            seed=int(self.rng.integers(2**31)),
+            seed=int(self.rng.integers(2**31)) if seed is None else seed,
         )
-        self._seen_lo, self._seen_hi, self._warm = np.full(d, np.inf), np.full(d, -np.inf), 0
-        return TabularBasis(1, self.n_actions), d  # the basis is unused: LSPI keeps the program's shape uniform
 
     def _init_reach(self) -> tuple[TabularBasis, int]:
         """The reach learner (`agent.learners.reach`) over the world's short continuous vectors (an
@@ -89,17 +111,57 @@ class GenericContinuous(GenericBase):
 
     def _warmup(self, obs: Observation) -> Decision:
         """A random step that measures the range of every value; at its end the tiles are laid
-        over those ranges (widened by a tenth of their span on each side)."""
+        over those ranges (widened by a tenth of their span on each side). The planner's, with
+        `action_scale=0`: whole moves, then half moves if a whole one was not carried out faithfully
+        (`box_moves`), each step kept to measure it."""
         x = self._flat(obs)
         self._seen_lo, self._seen_hi = np.minimum(self._seen_lo, x), np.maximum(self._seen_hi, x)
         if obs.t == 0:
             self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
+        if self._probe is not None and self._probe_prev is not None and obs.t > 0:
+            self._probe.append((self._probe_prev[1], x - self._probe_prev[0]))
         self._warm += 1
+        if self._probe is not None and self._warm == self.params.sarsa_warmup // 2:
+            self._probe_whole = unexplained(*self._probe_arrays())
+            self._probe = []
+            if not probe_half_moves(self._probe_whole):  # whole moves followed: no half moves to try
+                self._choose_scale(obs.step)
         if self._warm >= self.params.sarsa_warmup:
             self._set_ranges()
+            if self._probe is not None:
+                self._choose_scale(obs.step)
         if obs.done:
+            self._probe_prev = None
             return Decision(reset=True, start=-1)
-        return Decision(tuple(float(v) for v in self.actions[int(self.rng.integers(self.n_actions))]))
+        probing_half = self._probe is not None and self._probe_whole is not None and self._half_actions is not None
+        table = self._half_actions if probing_half and self._half_actions is not None else self.actions
+        move = table[int(self.rng.integers(self.n_actions))]
+        self._probe_prev = (x, move) if self._probe is not None else None
+        return Decision(tuple(float(v) for v in move))
+
+    def _probe_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        probe = self._probe or []
+        d = self.actions.shape[1]
+        return np.array([p[0] for p in probe]).reshape(-1, d), np.array([p[1] for p in probe]).reshape(len(probe), -1)
+
+    def _choose_scale(self, step: int) -> None:
+        """The warm-up's end (`action_scale=0`): the plan takes half moves when the body carried
+        them out more faithfully than whole ones (`box_moves.move_scale`); said in an event."""
+        half = unexplained(*self._probe_arrays()) if probe_half_moves(self._probe_whole) else None
+        scale = move_scale(self._probe_whole, half)
+        self._probe, self._probe_prev = None, None
+        self._set_scale(scale)
+        whole = "?" if self._probe_whole is None else f"{self._probe_whole:.0%}"
+        self.emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"a linear fit of the moves sent left {whole} of a whole move's step unexplained"
+                + ("" if half is None else f" and {half:.0%} of a half move's")
+                + f": the plan takes {'half' if scale != 1.0 else 'whole'} moves",
+                step,
+                reason="move_scale",
+            )
+        )
 
     def _set_ranges(self) -> None:
         """Lay the tiles (or the planner's grid) over the ranges the warm-up measured."""
@@ -254,3 +316,58 @@ class GenericContinuous(GenericBase):
         if obs.done or a is None:
             return Decision(reset=True, start=-1)
         return Decision(tuple(float(v) for v in self.actions[a]))
+
+    def _set_scale(self, scale: float, seed: int | None = None) -> None:
+        """The plan's moves span `scale` of each bound: a new action table and a new planner (the
+        warm-up's end, before it learned anything; or a restore, whose planner state follows)."""
+        if scale == self._scale:
+            return
+        self._scale = scale
+        self.actions = action_table(self.spec, self.params.action_levels, scale)
+        assert self.planner is not None
+        self.planner = self._new_planner(self.planner.dims, seed)
+
+    def moves_state(self) -> dict[str, Any]:
+        """What `action_scale=0` and `distance=auto` settled, for a checkpoint."""
+        return {"scale": self._scale, "distance": self._distance, "distance_now": self._distance_now}
+
+    def restore_moves(self, state: dict[str, Any] | None) -> None:
+        """Back to what a checkpoint's `moves_state` settled (before the planner's own state)."""
+        if state is None:
+            return
+        if self.planner is not None and not isinstance(self.planner, ReachLearner):
+            self._set_scale(float(state["scale"]), seed=0)  # the planner's rng comes with its state
+        self._distance, self._distance_now = state["distance"], str(state["distance_now"])
+
+    def _trace_distance(self, step: int | None = None) -> str:
+        """The distance between box traces in force: `distance` when named; `auto`: the net move
+        when a planner's sweep shows that the moves add up (`box_moves.moves_add_up`, on each
+        trace's summed moves and displacement), else the padded sum. With `step` (a sweep just
+        ended) the rule is evaluated on that sweep, until it says net moves or the policy is watched;
+        then it is settled (a policy's rank by where its traces end follows it: `_by_ends`)."""
+        if self.params.distance != "auto":
+            return self.params.distance
+        if self._distance is not None or step is None:
+            return self._distance or self._distance_now
+        if self.discrete or self.learner != "planner" or not self._ends:
+            return "padded"
+        traces, k = self._sweep.traces, max(1, self._sweep.repeats)
+        rows = [(i, v) for i, v in sorted(self._ends.items()) if (i + 1) * k <= len(traces)]
+        nets = np.array(
+            [self.actions[np.asarray(traces[(i + 1) * k - 1], dtype=np.int64)].sum(axis=0) for i, _ in rows]
+        ).reshape(len(rows), -1)
+        moved = np.array([v[1] - v[0] for _, v in rows]).reshape(len(rows), -1)
+        adds = moves_add_up(nets, moved)
+        self._distance_now = "net" if adds else "padded"
+        if adds is not None and (self._watching or adds):
+            self._distance = self._distance_now
+            self.emit(
+                EventOutput(
+                    EventKind.POLICY_ITERATION,
+                    f"where the traces ended is {'' if adds else 'not '}linear in their summed moves: traces "
+                    + ("are compared by their net move" if adds else "are compared step by step (padded sum)"),
+                    step,
+                    reason="net_moves" if adds else "padded_moves",
+                )
+            )
+        return self._distance_now

@@ -104,30 +104,38 @@ class GenericProgramParams:
     motor_scale: float = option(
         0.0,
         "planner over camera frames: the warm-up's random moves span this fraction of each bound (0: "
-        "action_scale; larger moves change a frame by more pixels, so the map is fitted on clearer differences)",
+        "action_scale, whole moves when that is 0; larger moves change a frame by more pixels, so the map is fitted "
+        "on clearer differences)",
         min=0.0,
         max=1.0,
     )
     action_levels: int = option(3, "values per dimension when a box action space is discretised", min=2)
     action_scale: float = option(
-        1.0,
+        0.0,
         "box actions: the discretised values span this fraction of each bound, about the box's middle "
-        "(smaller moves: finer traces, for a body that follows small moves more faithfully)",
-        min=0.01,
+        "(smaller moves: finer traces, for a body that follows small moves more faithfully); 0: whole "
+        "moves, except for the planner over the observation when its warm-up finds half moves carried out "
+        "more faithfully (a linear fit of the moves sent leaves over a quarter of a whole move's step "
+        "unexplained, and at least a tenth less of a half move's: agent.programs.box_moves)",
+        min=0.0,
         max=1.0,
     )
     distance: str = option(
-        "padded",
+        "auto",
         "box actions: padded sum (Eq 3.1) or dtw between the continuous traces, or net: the distance "
-        "between their sums (the net move commanded, for bodies whose moves add up, such as a hand)",
-        choices=("padded", "dtw", "net"),
+        "between their sums (the net move commanded, for bodies whose moves add up, such as a hand); "
+        "auto: net for the planner once a sweep shows the moves add up (where each trace ended less "
+        "where it started is linear in its summed moves, explaining 90 % of its variance: "
+        "agent.programs.box_moves), else padded",
+        choices=("auto", "padded", "dtw", "net"),
     )
     rank: str = option(
         "auto",
         "once the policy is watched, a newer policy is published when it is better by: more goals, "
         "then shorter traces (goals), or a lower end disparity (ends, the planner: its traces end "
         "more nearly where a similarity of their starts puts them, which a net-move map needs); "
-        "auto: ends for the planner with distance=net in a deterministic world, else goals",
+        "auto: ends for the planner comparing net moves (distance=net, or auto settled on net) in a "
+        "deterministic world, else goals",
         choices=("auto", "goals", "ends"),
     )
     dtw_penalty: float = option(

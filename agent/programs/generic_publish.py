@@ -58,7 +58,7 @@ class GenericPublish(GenericBase):
             actions=None if self.discrete or self.learner == "reach" else self.actions.copy(),
             dims=self.dims,
             estimator=self.estimator,
-            distance=prm.distance,
+            distance=self._trace_distance(),
             dtw_penalty=prm.dtw_penalty,
             rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
             n_actions=self.n_actions,

@@ -69,6 +69,7 @@ class GenericState(GenericBase):
             out.update(swept_policy=self._swept_policy, since_sweep=self._since_sweep)
             out["plan_for_sweep"] = self._plan_for_sweep
         if self.planner is not None:
+            out["moves"] = self.moves_state()  # the move size and trace distance settled (generic_continuous)
             out["planner"] = self.planner.state()
             out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy())
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
@@ -157,6 +158,7 @@ class GenericState(GenericBase):
             self._since_sweep = int(state["since_sweep"])
             self._plan_for_sweep = bool(state["plan_for_sweep"])
         if self.planner is not None:
+            self.restore_moves(state.get("moves"))
             self.planner.restore(state["planner"])
             self._start_lo = np.asarray(state["start_lo"], dtype=np.float64)
             self._start_hi = np.asarray(state["start_hi"], dtype=np.float64)

@@ -219,6 +219,7 @@ class GenericSweeps(GenericBase):
                     reason="deterministic",
                 )
             )
+        self._trace_distance(step)  # `distance=auto`: this sweep's traces may settle it (generic_continuous)
         new = sweep_score(sw.reached, sw.traces)
         score = (new.fraction, new.length)
         good = new.fraction >= self.params.watch_after
@@ -344,5 +345,5 @@ class GenericSweeps(GenericBase):
         """Whether policies are ranked by where their traces end (`end_disparity`) once watched: the
         planner's net-move maps in a deterministic world (`generic.rank=auto`), or when told."""
         rank = self.params.rank
-        chosen = rank == "ends" or (rank == "auto" and self.params.distance == "net")
+        chosen = rank == "ends" or (rank == "auto" and self._trace_distance() == "net")
         return chosen and self.planner is not None and not self.stochastic

@@ -1,0 +1,71 @@
+"""How the generic program fits box actions to the body it finds, with no truth: whether traces
+are compared by their net move (`distance=auto`), and how large a move the planner takes
+(`action_scale=0`). Pure functions of what the program saw; the rules in docs/zoo.md.
+
+* **Moves that add up.** On a body moved by increments (a hand, a point, joints commanded by
+  steps) where a trace ends less where it started is the sum of its moves times the body's gain,
+  whatever their order: the net move is then the start's place in the moves' units (the traces
+  end at one goal), which is what a map of the starts should show. On a body whose moves are
+  forces (a car on a hill) the sum says little of where it went. The program fits, over a sweep's
+  traces, the displacement (end less start, in the coordinates it plans in) as linear in the
+  summed moves: when the fit explains at least `ADDS_UP` of the displacement's variance, the moves
+  add up and traces are compared by their net move.
+* **Moves the body carries out.** A body that lags or saturates (panda-gym's hand: a whole move is
+  not done by the next step, and the rest spills into the steps after) follows a half move more
+  faithfully. The planner's warm-up of random moves measures, over its first half of whole moves,
+  the share of each step's displacement that a linear fit of the moves sent leaves unexplained;
+  above `UNFAITHFUL` the second half takes half moves, and the plan takes half moves when they
+  leave at least `BETTER` less unexplained. A body that follows its moves keeps whole moves (and
+  the warm-up is the same as before: whole moves throughout).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: the moves add up when the summed moves explain at least this share of the displacement's variance
+ADDS_UP = 0.9
+#: a step of whole moves is carried out unfaithfully when a linear fit leaves more than this share
+UNFAITHFUL = 0.25
+#: half moves are taken when they leave at least this much less of a step unexplained
+BETTER = 0.1
+
+
+def unexplained(moves: np.ndarray, displacements: np.ndarray) -> float | None:
+    """The share of the displacements' variance (about their mean) that a least-squares fit linear
+    in the moves (with a constant) leaves unexplained: 0 when they are the moves times a gain;
+    None with too few rows to tell (twice the fit's coefficients) or no displacement at all."""
+    m = np.asarray(moves, dtype=np.float64)
+    d = np.asarray(displacements, dtype=np.float64)
+    if m.ndim != 2 or d.ndim != 2 or len(m) != len(d) or len(m) < 2 * (m.shape[1] + 1):
+        return None
+    centred = d - d.mean(axis=0)
+    total = float(np.square(centred).sum())
+    if total <= 1e-18:
+        return None
+    x = np.hstack([m, np.ones((len(m), 1))])
+    w = np.linalg.lstsq(x, d, rcond=None)[0]
+    return float(np.square(d - x @ w).sum() / total)
+
+
+def moves_add_up(nets: np.ndarray, displacements: np.ndarray) -> bool | None:
+    """Whether each trace's displacement is linear in its net move (summed moves) across a sweep:
+    the `distance=auto` rule (None: too few traces to tell)."""
+    share = unexplained(nets, displacements)
+    return None if share is None else share <= 1.0 - ADDS_UP
+
+
+def probe_half_moves(whole_share: float | None) -> bool:
+    """Whether the warm-up goes on with half moves: a whole move was carried out unfaithfully."""
+    return whole_share is not None and whole_share > UNFAITHFUL
+
+
+def move_scale(whole_share: float | None, half_share: float | None) -> float:
+    """The fraction of each bound the plan's moves span: 0.5 when half moves were carried out more
+    faithfully than whole ones (by at least `BETTER` of a step), else 1."""
+    if whole_share is None or half_share is None or not probe_half_moves(whole_share):
+        return 1.0
+    return 0.5 if half_share <= whole_share - BETTER else 1.0
+
+
+__all__ = ["ADDS_UP", "BETTER", "UNFAITHFUL", "move_scale", "moves_add_up", "probe_half_moves", "unexplained"]
