@@ -43,12 +43,13 @@ The learner follows the observation (`learner=auto`; the attach event says which
   sample, fed through Gaussian radial basis functions (ch. 6: PCA + RBF), LSPI over random samples.
 
 Box action spaces are discretised into `action_levels` values per dimension, spanning `action_scale`
-of each bound (a hand that follows small moves more faithfully than large ones draws finer traces
-with half moves: panda-gym's, `docs/zoo.md`); their traces are the
-continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time warping
+of each bound (0, the default: whole moves, or half moves where the planner's warm-up finds the body
+carries them out more faithfully, as panda-gym's hand; `agent.programs.box_moves`); their traces are
+the continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time warping
 (`distance=dtw`, with a cost per repeated step so trace length stays in it), or by the distance
 between their sums (`distance=net`: the net move commanded, blind to the order of the moves, for
-bodies whose moves add up). Discrete traces are compared with the edit distance.
+bodies whose moves add up; `auto`, the default: net where a planner's sweep shows they do, else the
+padded sum). Discrete traces are compared with the edit distance.
 
 Egocentric actions: the tabular learner finds which actions are rotations (repeated, they come
 back to where they started) and compares traces in the frame of their start

@@ -394,10 +394,10 @@ SOURCES["zoo-continuous"] = Source(
                 "(the same command)",
             ),
             (
-                "PandaReach-v3, hand position, padded sum",
+                "PandaReach-v3, hand position, at the defaults (the program picks net moves, half moves)",
                 "PandaReach (state)",
-                "results/bench-zoo-panda/state-padded.jsonl",
-                'sme bench zoo --seeds 3 --world "PandaReach (state)"',
+                "results/bench-zoo-panda/state-defaults.jsonl",
+                'sme bench zoo --defaults --seeds 3 --world "PandaReach (state)"',
             ),
             (
                 "PandaReach-v3, hand position, net moves, half moves (`distance=net`, `action_scale=0.5`)",
