@@ -62,6 +62,8 @@ class GenericPublish(GenericBase):
             dtw_penalty=prm.dtw_penalty,
             rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
             n_actions=self.n_actions,
+            discrete_distance=prm.discrete_distance if self.discrete else "edit",
+            embedding=prm.embedding,
         )
         frac = sweep_score(list(flags), traces).fraction
         self._pending_embedding = {
