@@ -104,7 +104,8 @@ def weighted_mds(
     Vp = np.linalg.pinv(V + 1.0 / n) - 1.0 / n  # Moore-Penrose inverse of V (its null space: the ones)
     s, d = _stress(X, D, W)
     s0, it = s, 0
-    for it in range(1, max_iter + 1):
+    while it < max_iter:
+        it += 1
         with np.errstate(divide="ignore", invalid="ignore"):
             B = np.where(d > 0, -W * D / np.where(d > 0, d, 1.0), 0.0)
         np.fill_diagonal(B, 0.0)
