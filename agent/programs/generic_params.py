@@ -126,8 +126,8 @@ class GenericProgramParams:
         "auto",
         "discrete actions: edit distance between traces (Algorithm 1), or moves: the distance between how "
         "many times each action occurs in them (turns left out; where moves add up it keeps the places "
-        "round walls and holes, agent.embedding.move_counts); auto: moves where each start has one trace "
-        "(a deterministic world), else edit",
+        "round walls and holes, agent.embedding.move_counts); auto: moves over a table of states (tabular "
+        "and model learners) where each start has one trace (a deterministic world), else edit",
         choices=("auto", "edit", "moves"),
     )
     embedding: str = option(
