@@ -92,8 +92,8 @@ def embed_job(
     the mode trace where it is what a start mostly does (`mode_share`), else mean traces. Discrete
     traces of one sample a start (`discrete_distance=auto`) or `moves`: the distance between their
     action counts, turns left out (`move_counts`). Then classical MDS, or weighted MDS from it
-    (`embedding=weighted`; `auto`: where the moves distance was used). A pure function, run off the
-    act path."""
+    (`embedding=weighted`; `auto`: where the moves distance was used; the eigenvalues are classical
+    MDS's either way). A pure function, run off the act path."""
     symbols = n_actions
     if rotations is not None and actions is None:
         rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
