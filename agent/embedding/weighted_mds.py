@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from sensorimotor.agent.embedding.classical_mds import classical_mds
 
@@ -40,8 +41,11 @@ def distance_weights(D: np.ndarray, power: float = POWER) -> np.ndarray:
 
 
 def _stress(X: np.ndarray, D: np.ndarray, W: np.ndarray) -> tuple[float, np.ndarray]:
-    d = np.sqrt(np.maximum(np.square(X[:, None, :] - X[None, :, :]).sum(axis=2), 0.0))
-    return float((W * np.square(d - D)).sum() / 2), d
+    d = cdist(X, X)
+    r = d - D
+    np.square(r, out=r)
+    r *= W
+    return float(r.sum() / 2), d
 
 
 def weighted_mds(
@@ -102,12 +106,14 @@ def weighted_mds(
         return WeightedMDSResult(X, s, s, 0)
     V = np.diag(W.sum(axis=1)) - W
     Vp = np.linalg.pinv(V + 1.0 / n) - 1.0 / n  # Moore-Penrose inverse of V (its null space: the ones)
+    WD = W * D
     s, d = _stress(X, D, W)
     s0, it = s, 0
     while it < max_iter:
         it += 1
-        with np.errstate(divide="ignore", invalid="ignore"):
-            B = np.where(d > 0, -W * D / np.where(d > 0, d, 1.0), 0.0)
+        d[d == 0] = np.inf  # coincident points: no pull (B_ij = 0)
+        B = WD / d
+        B *= -1.0
         np.fill_diagonal(B, 0.0)
         np.fill_diagonal(B, -B.sum(axis=1))
         X = Vp @ (B @ X)

@@ -50,8 +50,8 @@ def action_table(spec: WorldSpec, levels: int, scale: float = 1.0) -> np.ndarray
     return np.array(list(itertools.product(*grids)), dtype=np.float64)
 
 
-#: `embedding=auto`: weighted MDS up to this many starts (its cost grows as n^3; classical MDS beyond)
-WEIGHTED_MAX = 1500
+#: `embedding=auto`: weighted MDS up to this many starts (its cost grows as n^3: about 4 s at 1,000; classical MDS beyond)
+WEIGHTED_MAX = 1000
 
 #: `estimator=auto`: the mode trace stands for a start when it is at least this share of its samples
 MODE_SHARE = 0.5

@@ -134,7 +134,7 @@ class GenericProgramParams:
         "auto",
         "classical MDS of the trace distances, or weighted: metric MDS from it, each pair weighted by "
         "distance^-2 (the near pairs place the points; agent.embedding.weighted_mds); auto: weighted "
-        "where the moves distance is used (up to 1,500 starts), else classical",
+        "where the moves distance is used (up to 1,000 starts), else classical",
         choices=("auto", "classical", "weighted"),
     )
     rank: str = option(
