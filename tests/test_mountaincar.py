@@ -107,3 +107,42 @@ def test_kalman_velocity_matches_filterpys_filter():
     f2 = VelocityFilter(measurement_var=1e-4)
     f2.restore(f.state())
     assert np.allclose(f2.state()["P"], kf.P) and f2.update(0.31) == f.update(0.31)
+
+
+def test_window_velocity_follows_a_quantised_swing_with_less_lag_than_the_kalman_filter():
+    """A position quantised to whole vergence steps, swinging as the car does in the valley: the
+    window slope lags the true velocity by about window / 2 steps, the program's Kalman filter
+    (measurement variance 1/12, process variance 1e-5, in vergence steps) by some 14."""
+    from sensorimotor.agent.learners.window_velocity import WindowVelocity
+
+    t = np.arange(600)
+    w = 2 * np.pi / 120
+    vel = 8 * w * np.cos(w * t)
+    quantised = np.round(8 * np.sin(w * t))
+
+    def lag_and_rmse(f):
+        f.reset(quantised[0])
+        est = np.array([f.update(z)[1] for z in quantised])
+        lag = int(np.argmax([np.dot(est[120:], np.roll(vel, k)[120:]) for k in range(40)]))
+        return lag, float(np.sqrt(np.mean((est[120:] - vel[120:]) ** 2)))
+
+    lag_w, rmse_w = lag_and_rmse(WindowVelocity(8))
+    lag_k, rmse_k = lag_and_rmse(VelocityFilter(measurement_var=1 / 12, process_var=1e-5))
+    assert lag_w <= 5 and lag_k >= 10, (lag_w, lag_k)
+    assert rmse_w < 0.5 * rmse_k, (rmse_w, rmse_k)
+
+
+def test_window_velocity_is_the_least_squares_slope_and_restores():
+    from sensorimotor.agent.learners.window_velocity import WindowVelocity
+
+    f = WindowVelocity(3)
+    f.reset(1.0)
+    assert f.update(1.0) == (1.0, 0.0)
+    f.update(2.0)
+    assert f.update(4.0) == pytest.approx((4.0, np.polyfit(range(4), [1.0, 1.0, 2.0, 4.0], 1)[0]))
+    assert f.update(5.0)[1] == pytest.approx(np.polyfit(range(4), [1.0, 2.0, 4.0, 5.0], 1)[0])
+    g = WindowVelocity(3)
+    g.restore(f.state())
+    assert g.update(7.0) == f.update(7.0)
+    with pytest.raises(ValueError, match="window"):
+        WindowVelocity(0)

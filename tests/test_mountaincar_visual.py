@@ -222,3 +222,19 @@ def test_recalled_readings_give_the_same_run_in_fewer_world_steps_and_a_wrong_on
                 assert not any(prog._recall.get(v) == p for v, p in wrong.items())  # a check differed: forgotten
     assert runs[0][0] == runs[64][0]  # the same evaluations, step for step
     assert runs[64][1] < 0.7 * runs[0][1], runs  # in fewer world steps (most of the rest: learning to verge)
+
+
+def test_velocity_window_drives_on_the_slope_of_the_last_positions_and_restores(world):
+    """`velocity=window`: the car state is (position, least-squares slope of the last positions),
+    restarted at each episode, and a restored program goes on the same."""
+    prog = MountainCarProgram(world.spec(), seed=0, velocity="window", velocity_window=4)
+    prog._make_driver(0.0, 10.0)
+    for i, p in enumerate([1.0, 1.0, 2.0, 3.0, 3.0]):
+        s = prog._car_state(p, i == 0)
+    assert s == pytest.approx([3.0, np.polyfit(range(5), [1.0, 1.0, 2.0, 3.0, 3.0], 1)[0]])
+    again = MountainCarProgram(world.spec(), seed=0, velocity="window", velocity_window=4)
+    again.restore(prog.state())
+    assert list(again._car_state(4.0, False)) == list(prog._car_state(4.0, False))
+    assert list(prog._car_state(5.0, True)) == [5.0, 0.0]
+    with pytest.raises(ValueError, match="velocity"):
+        MountainCarProgram(world.spec(), seed=0, velocity="spline")

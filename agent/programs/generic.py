@@ -49,7 +49,10 @@ the continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic ti
 (`distance=dtw`, with a cost per repeated step so trace length stays in it), or by the distance
 between their sums (`distance=net`: the net move commanded, blind to the order of the moves, for
 bodies whose moves add up; `auto`, the default: net where a planner's sweep shows they do, else the
-padded sum). Discrete traces are compared with the edit distance.
+padded sum). Discrete traces are compared with the edit distance, or, over a table of
+states with one trace a start (a deterministic world: `discrete_distance=auto`), by how many times each action occurs in
+them (turns left out), embedded by weighted MDS (`embedding=auto`): a map of places round walls
+and holes, where the edit distance maps the ways round them (`agent.embedding.move_counts`).
 
 Egocentric actions: the tabular learner finds which actions are rotations (repeated, they come
 back to where they started) and compares traces in the frame of their start

@@ -10,8 +10,10 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.embedding import classical_mds, trace_distances
+from sensorimotor.agent.embedding.move_counts import move_count_distances
 from sensorimotor.agent.embedding.probabilistic import mean_pair_distances, mean_trace_distances, mode_trace
 from sensorimotor.agent.embedding.rotation_frames import Rotations, frame_trace
+from sensorimotor.agent.embedding.weighted_mds import weighted_mds
 from sensorimotor.agent.learners.motor_map import fit_motor_map
 from sensorimotor.protocol.messages import WorldSpec
 
@@ -48,6 +50,9 @@ def action_table(spec: WorldSpec, levels: int, scale: float = 1.0) -> np.ndarray
     return np.array(list(itertools.product(*grids)), dtype=np.float64)
 
 
+#: `embedding=auto`: weighted MDS up to this many starts (its cost grows as n^3: about 4 s at 1,000; classical MDS beyond)
+WEIGHTED_MAX = 1000
+
 #: `estimator=auto`: the mode trace stands for a start when it is at least this share of its samples
 MODE_SHARE = 0.5
 
@@ -76,14 +81,19 @@ def embed_job(
     rotations: tuple[int, list[list[int]]] | None = None,
     n_actions: int = 0,
     reached: list[list[bool]] | None = None,
+    discrete_distance: str = "edit",
+    embedding: str = "classical",
 ) -> dict[str, Any]:
     """Trace distances and classical MDS of each start's sampled traces (one sample each in a
     deterministic world): edit distance of discrete actions (in the start's frame when `rotations`,
     (order, [[action, power], ...]), says which actions turn: `frame_trace`); the padded sum or DTW
     of the action values when `actions` is the table of a discretised box. Several samples: the mode
     trace, or the mean pairwise distance (ch. 9.4), or the padded sum between mean traces; `auto`:
-    the mode trace where it is what a start mostly does (`mode_share`), else mean traces. A pure
-    function, run off the act path."""
+    the mode trace where it is what a start mostly does (`mode_share`), else mean traces. Discrete
+    traces of one sample a start (`discrete_distance=auto`) or `moves`: the distance between their
+    action counts, turns left out (`move_counts`). Then classical MDS, or weighted MDS from it
+    (`embedding=weighted`; `auto`: where the moves distance was used; the eigenvalues are classical
+    MDS's either way). A pure function, run off the act path."""
     symbols = n_actions
     if rotations is not None and actions is None:
         rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
@@ -93,13 +103,19 @@ def embed_job(
         estimator = "mode" if actions is not None or mode_share(traces) >= MODE_SHARE else "mean_trace"
     if estimator == "plain":  # one sampled trace per start, as if the world were deterministic
         traces, reached = [s[:1] for s in traces], None if reached is None else [r[:1] for r in reached]
+    moves = False
     if any(len(t) > 1 for t in traces) and estimator == "mean_trace" and actions is None:
         D = mean_trace_distances(traces, symbols, reached)
     elif any(len(t) > 1 for t in traces) and estimator == "mean" and actions is None:
         D = mean_pair_distances(traces, substitution_cost=2)
     else:
         canon = [list(mode_trace(t)) for t in traces]
-        if actions is None:
+        one = all(len(t) <= 1 for t in traces)
+        moves = actions is None and (discrete_distance == "moves" or (discrete_distance == "auto" and one))
+        if moves:
+            skip = [] if rotations is None else [int(a) for a, _ in rotations[1]]  # turns: frame, not place
+            D = move_count_distances(canon, max(symbols, 1 + max((max(t, default=0) for t in canon), default=0)), skip)
+        elif actions is None:
             D = trace_distances(canon, kind="edit", substitution_cost=2)
         else:
             table = np.asarray(actions)
@@ -112,6 +128,8 @@ def embed_job(
             else:
                 D = trace_distances(cont, kind="continuous")
     mds = classical_mds(D, dims)
+    if embedding == "weighted" or (embedding == "auto" and moves and len(D) <= WEIGHTED_MAX):
+        return {"coordinates": weighted_mds(D, dims, init=mds.coordinates).coordinates, "eigenvalues": mds.eigenvalues}
     return {"coordinates": mds.coordinates, "eigenvalues": mds.eigenvalues}
 
 

@@ -129,6 +129,21 @@ class GenericProgramParams:
         "agent.programs.box_moves), else padded",
         choices=("auto", "padded", "dtw", "net"),
     )
+    discrete_distance: str = option(
+        "auto",
+        "discrete actions: edit distance between traces (Algorithm 1), or moves: the distance between how "
+        "many times each action occurs in them (turns left out; where moves add up it keeps the places "
+        "round walls and holes, agent.embedding.move_counts); auto: moves over a table of states (tabular "
+        "and model learners) where each start has one trace (a deterministic world), else edit",
+        choices=("auto", "edit", "moves"),
+    )
+    embedding: str = option(
+        "auto",
+        "classical MDS of the trace distances, or weighted: metric MDS from it, each pair weighted by "
+        "distance^-2 (the near pairs place the points; agent.embedding.weighted_mds); auto: weighted "
+        "where the moves distance is used (up to 1,000 starts), else classical",
+        choices=("auto", "classical", "weighted"),
+    )
     rank: str = option(
         "auto",
         "once the policy is watched, a newer policy is published when it is better by: more goals, "

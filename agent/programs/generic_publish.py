@@ -62,6 +62,11 @@ class GenericPublish(GenericBase):
             dtw_penalty=prm.dtw_penalty,
             rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
             n_actions=self.n_actions,
+            # auto: moves only over a table of states, where an action is a step between them
+            discrete_distance="edit"
+            if not self.discrete or (prm.discrete_distance == "auto" and not self.tabular)
+            else prm.discrete_distance,
+            embedding=prm.embedding,
         )
         frac = sweep_score(list(flags), traces).fraction
         self._pending_embedding = {

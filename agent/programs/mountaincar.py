@@ -8,7 +8,7 @@ places any new trace without re-embedding: that coordinate is the agent's positi
 
 Stage 2, driving: every car step starts with the eyes parallel; the agent verges (greedy), reads its
 position from the trace, a constant-velocity Kalman filter (filterpy) over that position gives
-velocity, and Sarsa(lambda) with tile coding (alpha 0.3, gamma 0.99, lambda 0.9) picks reverse,
+velocity (`velocity=window`: the slope of the last positions instead), and Sarsa(lambda) with tile coding (alpha 0.3, gamma 0.99, lambda 0.9) picks reverse,
 coast or forward (reward -1 per car step). Every `eval_every` training car steps, learning halts
 and the greedy policy is run from the world's fixed evaluation states: the mean steps to goal is
 published as an `evaluation` event (the learning curve).
@@ -39,6 +39,7 @@ from sensorimotor.agent.embedding.procrustes import SimilarityTransform
 from sensorimotor.agent.learners.kalman_velocity import VelocityFilter
 from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from sensorimotor.agent.learners.window_velocity import WindowVelocity
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.agent.programs.vergence import VergencePractice, foveal_difference
@@ -71,6 +72,13 @@ class MountainCarProgramParams:
     watch_after: int = option(50_000, "training car steps before episodes report performance", min=0)
     report_after: int = option(400, "car steps after which a trained driver gives up an episode", min=1)
     process_var: float = option(1e-5, "process variance of the velocity Kalman filter", min=0.0)
+    velocity: str = option(
+        "kalman",
+        "velocity estimate: kalman (a constant-velocity Kalman filter on the position) or window "
+        "(the least-squares slope of the last velocity_window + 1 positions)",
+        choices=("kalman", "window"),
+    )
+    velocity_window: int = option(8, "car steps the window velocity estimate spans", min=1)
     policy_map: int = option(
         0, "clusters of a policy map of the drive traces emitted after each evaluation (0: none; ch. 9.6)", min=0
     )
@@ -158,7 +166,7 @@ class MountainCarProgram(Program):
         # driving
         self.training_steps = 0
         self.episodes = 0
-        self._kf: VelocityFilter | None = None
+        self._kf: VelocityFilter | WindowVelocity | None = None
         self._trace: list[int] | None = None  # the vergence trace being read, None between readings
         self._last_drive = False
         self._s: np.ndarray | None = None
@@ -265,8 +273,11 @@ class MountainCarProgram(Program):
             coder, 3, alpha=prm.alpha, gamma=prm.gamma, lam=prm.lam, epsilon=prm.drive_epsilon, seed=seed
         )
 
-    def _filter(self) -> VelocityFilter:
-        """Measurement noise: a position is quantised to one vergence step (uniform, variance q^2/12)."""
+    def _filter(self) -> VelocityFilter | WindowVelocity:
+        """The velocity estimate (`velocity`). The Kalman filter's measurement noise: a position is
+        quantised to one vergence step (uniform, variance q^2/12)."""
+        if self.params.velocity == "window":
+            return WindowVelocity(self.params.velocity_window)
         return VelocityFilter(measurement_var=self.quantum**2 / 12, process_var=self.process_var * self.quantum**2)
 
     @property

@@ -81,7 +81,17 @@ def toy_text_ceiling(world: Any, program: Any) -> Ceiling | None:
             ok.append(hit)
         traces.append(per)
         reached.append(ok)
-    out = embed_job(traces, None, program.dims, estimator=program.estimator, n_actions=n_actions, reached=reached)
+    prm = program.params
+    out = embed_job(
+        traces,
+        None,
+        program.dims,
+        estimator=program.estimator,
+        n_actions=n_actions,
+        reached=reached,
+        discrete_distance=prm.discrete_distance,
+        embedding=prm.embedding,
+    )
     pos = np.asarray(truth.tensors["positions"], dtype=np.float64)
     frac = float(np.mean([r for per in reached for r in per]))
     return Ceiling(frac, float(procrustes_error(pos, np.asarray(out["coordinates"]))), k)
