@@ -220,6 +220,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
     def on_drop(self, step: int) -> None:
         """The body changed: what was learned no longer holds; relearn from fresh samples."""
         self.relearn_at = step
+        self._keep_for_relearn()
         self.lspi.reset()
         if self.sarsa is not None:
             self.sarsa.reset()
