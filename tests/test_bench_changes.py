@@ -150,3 +150,23 @@ def test_the_tie_order_follows_the_actions_to_where_they_lead():
     assert inherit_order(np.arange(3), before, after, 3).tolist() == [1, 0, 2]
     assert inherit_order(np.array([2, 0, 1]), before, after, 3).tolist() == [2, 1, 0]
     assert inherit_order(np.arange(3), before, {(b"x", 0): b"z"}, 3) is None  # nothing agrees: kept
+
+
+def test_a_delayed_body_is_relearned_with_the_last_action_in_the_state():
+    # actions applied a step late: the observation alone no longer says where an action leads.
+    # Relearning, the program keys its table by (observation, last action sent), where a one-step
+    # delay is deterministic, and drops each trace's last action (it never acts): the map it had.
+    def relearned(r, live, tap):
+        return live.at is not None and any(e.step > live.at and e.drop_step is not None for e in r.embeddings)
+
+    run, live, _, _, _ = C._run(
+        LAKE, C.pick_changes(["delay"])[0], 0, C.Budget(1_000, 5_000, 8_000, 0), True, relearned
+    )
+    before = [e for e in run.embeddings if e.step <= live.at][-1]
+    after = [e for e in run.embeddings if e.step > live.at and e.drop_step is not None]
+    assert after, "the delayed body was not relearned"
+    assert after[0].procrustes_error == pytest.approx(before.procrustes_error, abs=1e-9)
+    assert any(
+        e.kind == EventKind.POLICY_ITERATION and "last action" in e.detail
+        for e in run.events(EventKind.POLICY_ITERATION)
+    )

@@ -134,6 +134,7 @@ class GenericSweeps(GenericRelearn):
             # else only if the newer policy is accepted when the sweep ends
             assert self._sweep.last is not None
             trace, ok = self._sweep.last
+            self._trim(trace, ok)  # (generic_relearn: the action that never acted, in history mode)
             self._start_scores.append(self._trace_score(start, trace, ok))
             self._start_fair = self._start_fair and (self._checking or not self._diverged)
             if len(self._start_scores) >= self._sweep.repeats:
