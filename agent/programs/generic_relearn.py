@@ -104,6 +104,18 @@ class GenericRelearn(GenericBase):
             self._hist = -1 if dec.reset or not dec.values else int(dec.values[0])
         return dec
 
+    def _moves(self, nxt: Transitions) -> Transitions:
+        """Where each action led from each observation (the rotations are found in them): in history
+        mode the action applied at a step is the one sent before, the last action of the key."""
+        if not self._history:
+            return nxt
+        out: Transitions = {}
+        for (key, _), after in nxt.items():
+            h = int.from_bytes(key[-2:], "little", signed=True)
+            if h >= 0:
+                out[(key[:-2], h)] = after[:-2]
+        return out
+
     def _trim(self, trace: list[int], ok: bool) -> None:
         """In history mode a trace that reached the goal ends with an action that never acted (the
         goal came with the one sent before, applied late): it is no move of the way, and dropped."""
