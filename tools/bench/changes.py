@@ -214,6 +214,14 @@ def _run(
         return run, live, tap, spec, time.perf_counter() - t0
 
 
+def _relearned(embeddings: list[Embedding], at: int) -> list[Embedding]:
+    """The maps of the relearned policy: the first version after the change that says it was
+    relearned after the drop, and every version after it (a later one may be better: the first
+    good sweep's policy can still take detours among states not all met yet)."""
+    first = next((i for i, e in enumerate(embeddings) if e.step > at and e.drop_step is not None), None)
+    return [] if first is None else [e for e in embeddings[first:] if e.procrustes_error is not None]
+
+
 def _error(e: Embedding) -> float:
     return float(e.procrustes_error if e.procrustes_error is not None else np.nan)
 
@@ -242,7 +250,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
         if r.steps >= live.at + budget.after:
             return True
         pre = [e for e in r.embeddings if e.step <= live.at and e.procrustes_error is not None]
-        post = [e for e in r.embeddings if e.step > live.at and e.drop_step is not None]
+        post = _relearned(r.embeddings, live.at)
         if not (pre and post):
             return False
         bar = _error(pre[-1]) if fresh is None else max(_error(pre[-1]), fresh)
@@ -269,7 +277,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
     before = [e for e in run.embeddings if e.step <= live.at and e.procrustes_error is not None]
     pre_err = _error(before[-1]) if before else None
     detected = next((d for d in drops if d > live.at), None)
-    after = [e for e in run.embeddings if e.step > live.at and e.drop_step is not None]
+    after = _relearned(run.embeddings, live.at)
     first = after[0] if after else None
     good = next((e for e in after if pre_err is not None and _error(e) <= 1.5 * pre_err + 1e-9), None)
     ref = pre_err if fresh is None or pre_err is None else max(pre_err, fresh)
@@ -431,12 +439,16 @@ def render_scorecard(src: Any, text: str) -> str:
     rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
     head = (
         "| world | change | harm | missed / harmful | delay: steps | sweeps | ADWIN | Page-Hinkley | ours / ADWIN "
-        "| false alarms / 100k steps | steps to relearned | relearned error (before) | within 1.5x | command |"
+        "| false alarms / 100k steps | steps to relearned | relearned error (before; from scratch) "
+        "| within 1.5x: of before | of the changed body | command |"
     )
     out = [head, "|" + "---|" * head.count(" | ") + "---|"]
 
     def f(v: Any, nd: int = 3) -> str:
         return "-" if v is None else f"{v:,.{nd}g}" if isinstance(v, float) and abs(v) < 1000 else f"{v:,.0f}"
+
+    def g(v: Any) -> str:
+        return "-" if v is None else str(v)
 
     for r in rows:
         if not r.get("summary"):
@@ -445,7 +457,7 @@ def render_scorecard(src: Any, text: str) -> str:
         if r["change"] == NONE.label:
             out.append(
                 f"| {r['world']} | {r['change']} | | | | | | | | {f(r['false_alarms_per_100k'])} "
-                f"in {r['unperturbed_steps']:,} | | | | {cmd} |"
+                f"in {r['unperturbed_steps']:,} | | | | | {cmd} |"
             )
             continue
         out.append(
@@ -453,7 +465,8 @@ def render_scorecard(src: Any, text: str) -> str:
             f"| {f(r['delay_steps'])} | {f(r['delay_sweeps'], 2)} | {f(r['adwin_delay_sweeps'], 2)} "
             f"| {f(r['page_hinkley_delay_sweeps'], 2)} | {f(r['ours_over_adwin'], 2)} "
             f"| {f(r['false_alarms_per_100k'])} in {r['unperturbed_steps']:,} | {f(r['steps_to_relearned'])} "
-            f"| {f(r['relearned_error'])} ({f(r['error_before'])}) | {r['relearned_within_1.5x']} of {r['detected']} "
+            f"| {f(r['relearned_error'])} ({f(r['error_before'])}; {f(r.get('fresh_error'))}) "
+            f"| {r['relearned_within_1.5x']} of {r['detected']} | {g(r.get('within_reference'))} of {r['detected']} "
             f"| {cmd} |"
         )
     return "\n".join(out) + f"\n\nFrom `{src.command}` (its output: `docs/{src.file}`)."
@@ -548,6 +561,8 @@ def main(
         "steps_to_1.5x",
         "error_before",
         "error_at_1.5x",
+        "fresh_error",
+        "within_reference",
     )
     print("| " + " | ".join(cols) + " |")
     print("|" + "---|" * len(cols))
