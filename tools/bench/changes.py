@@ -6,8 +6,9 @@ detector fed and warmed up), the change is applied live (the agent is not told),
 until the map is relearned or the budget ends. Reported: detection delay (steps, seconds, and sweeps
 of the start states: stream samples / starts), missed detections, false alarms per 100,000 steps
 (drops before the change, and a whole unperturbed run per world and seed), steps to the relearned
-map (the first version after the drop within 1.5x the error before the change) and its error
-against the changed body's truth, and the harm of the change: the drop of the watched stream's mean
+map (the first version, from the first relearned one on, within 1.5x the error before the change)
+and its error against the world's truth beside the changed body's reference (its map learned from
+scratch: a changed body can draw a worse map by its nature), and the harm of the change: the drop of the watched stream's mean
 in the first sweep after it (1 - the fraction of starts the accepted policy still reaches, in a
 deterministic world). Beside ours, river's ADWIN and Page-Hinkley (mode down) score the same
 stream: a second run of the same seed in which the agent does not react (its detector only
