@@ -196,6 +196,10 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         return f"learner {self.learner} ({what}), goal {self.goal}, {self.n_actions} actions"
 
     def act(self, obs: Observation) -> Decision:
+        self._history_before(obs)  # (generic_relearn: a state that remembers the last action)
+        return self._history_after(self._act(obs))
+
+    def _act(self, obs: Observation) -> Decision:
         assert self.background is not None
         continuous = self.sarsa is not None or self.planner is not None
         if self.motor and self._motor_map is None:
@@ -224,6 +228,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
     def on_drop(self, step: int) -> None:
         """The body changed: what was learned no longer holds; relearn from fresh samples."""
         self.relearn_at = step
+        self._keep_for_relearn()
         self.lspi.reset()
         if self.sarsa is not None:
             self.sarsa.reset()

@@ -10,12 +10,12 @@ import numpy as np
 from sensorimotor.agent.embedding.rotation_frames import Rotations, find_rotations
 from sensorimotor.agent.programs.acceptance import end_disparity, sweep_score
 from sensorimotor.agent.programs.base import EmbeddingOutput, EventOutput
-from sensorimotor.agent.programs.generic_base import GenericBase
 from sensorimotor.agent.programs.generic_jobs import embed_job
+from sensorimotor.agent.programs.generic_relearn import GenericRelearn
 from sensorimotor.protocol.messages import EventKind, Trigger
 
 
-class GenericPublish(GenericBase):
+class GenericPublish(GenericRelearn):
     """Embedding jobs and the embeddings (and `relearned` events) they give."""
 
     def _find_rotations(self, step: int) -> Rotations | None:
@@ -23,7 +23,7 @@ class GenericPublish(GenericBase):
         again at each embedding from the transitions seen so far (an event says when they change);
         forgotten on a drop."""
         if self.tabular and self.discrete and self.params.frames == "auto" and self._transitions:
-            nxt = {k: first for k, (first, other) in self._transitions.items() if other is None}
+            nxt = self._moves({k: first for k, (first, other) in self._transitions.items() if other is None})
             found = find_rotations(nxt, range(self.n_actions))
             if found != self._rotations and found is not None:
                 turns = ", ".join(f"action {a} = {p} turn(s)" for a, p in found.powers)

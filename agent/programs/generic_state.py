@@ -10,10 +10,10 @@ import numpy as np
 from sensorimotor.agent.embedding.rotation_frames import Rotations
 from sensorimotor.agent.learners.lspi_features import basis_state, set_basis
 from sensorimotor.agent.learners.motor_map import MotorMap
-from sensorimotor.agent.programs.generic_base import GenericBase
+from sensorimotor.agent.programs.generic_relearn import GenericRelearn
 
 
-class GenericState(GenericBase):
+class GenericState(GenericRelearn):
     """The program as a checkpoint: `state` and `restore`."""
 
     def state(self) -> dict[str, Any]:
@@ -62,6 +62,7 @@ class GenericState(GenericBase):
             "rotations": None
             if self._rotations is None
             else [self._rotations.order, [list(p) for p in self._rotations.powers]],
+            **self.relearn_state(),
         }
         if self.model is not None:
             out["model"] = self.model.state()
@@ -149,6 +150,7 @@ class GenericState(GenericBase):
         self._start_fair = bool(state.get("start_fair", True))
         rot = state.get("rotations")
         self._rotations = None if rot is None else Rotations(int(rot[0]), tuple((int(a), int(p)) for a, p in rot[1]))
+        self.restore_relearn(state)
         if self.model is not None:
             self.model.restore(state["model"])
             self._fresh, self._since_plan = bool(state["fresh"]), int(state["since_plan"])

@@ -30,11 +30,11 @@ import numpy as np
 from sensorimotor.agent.learners.lspi_features import basis_state
 from sensorimotor.agent.programs.acceptance import Score, Verdict, compare, compare_ends, end_disparity, sweep_score
 from sensorimotor.agent.programs.base import Decision, EventOutput
-from sensorimotor.agent.programs.generic_base import GenericBase
+from sensorimotor.agent.programs.generic_relearn import GenericRelearn
 from sensorimotor.protocol.messages import EventKind, Observation
 
 
-class GenericSweeps(GenericBase):
+class GenericSweeps(GenericRelearn):
     """Sweeps of the start states and the acceptance of their policies."""
 
     RELEARN_CONFIRM = 3  # good sweeps after a drop that may go unpublished while their traces still change
@@ -77,11 +77,11 @@ class GenericSweeps(GenericBase):
             self._visited = set()
         self._visited.add((self._key(obs), trace[-1] if trace else -1))
         prefer = trace[-1] if trace else None
-        a = self.lspi.choose(self._q(obs, self._sweep_w), prefer)
+        a = self._pick(self._q(obs, self._sweep_w), prefer)
         if self._watching and not self._checking and self._accepted is not None and not self._diverged:
             rbf, self._sweep_rbf = self._sweep_rbf, self._accepted_rbf()
             try:
-                self._diverged = a != self.lspi.choose(self._q(obs, self._accepted), prefer)
+                self._diverged = a != self._pick(self._q(obs, self._accepted), prefer)
             finally:
                 self._sweep_rbf = rbf
         return a
@@ -109,6 +109,7 @@ class GenericSweeps(GenericBase):
             self._sweep_rbf = self._rbf_of(use)
         else:
             self._sweep_basis, self._sweep_rbf = None, None
+        self._inherit_order()
         self._sweep = self._new_sweep()
         self._diverged = False
         self._unfed = []
@@ -133,6 +134,7 @@ class GenericSweeps(GenericBase):
             # else only if the newer policy is accepted when the sweep ends
             assert self._sweep.last is not None
             trace, ok = self._sweep.last
+            self._trim(trace, ok)  # (generic_relearn: the action that never acted, in history mode)
             self._start_scores.append(self._trace_score(start, trace, ok))
             self._start_fair = self._start_fair and (self._checking or not self._diverged)
             if len(self._start_scores) >= self._sweep.repeats:
@@ -298,6 +300,7 @@ class GenericSweeps(GenericBase):
             return None
         if relearned:
             self._relearn_unconfirmed = 0
+            self._order_kept()
         if not self._checking and (better or not self._watching):
             self._accepted, self._best, self._held = np.array(self._sweep_w, copy=True), score, 0
             self._best_disparity = disparity if self._by_ends() else None
