@@ -154,7 +154,13 @@ class _Live:
 
 
 def _world(z: ZooWorld, seed: int) -> BodyChanges:
-    return BodyChanges(make_world(z.world, None, seed, z.params))
+    build = getattr(z, "build", None)  # a family of our own worlds (changes_families) builds its own
+    return build(seed) if build is not None else BodyChanges(make_world(z.world, None, seed, z.params))
+
+
+def sweep_len(z: ZooWorld, spec: Any) -> int:
+    """Stream samples per sweep: the start states, or a family's own count (a world without them)."""
+    return int(getattr(z, "sweep", 0) or spec.n_starts)
 
 
 def _run(
@@ -174,7 +180,7 @@ def _run(
         program = make_program(spec, seed, **z.program)
         params = dict(getattr(program, "detector_params", {}) or {})
         tap = Tap(make_detector(DEFAULT_DETECTOR, **params), react)
-        warm = int(params.get("warmup", 100)) + 2 * spec.n_starts
+        warm = int(params.get("warmup", 100)) + 2 * sweep_len(z, spec)
         live = _Live()
         t0 = time.perf_counter()
 
@@ -238,7 +244,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
         "kind": ch.kind,
         "params": ch.params,
         "seed": seed,
-        "n_starts": spec.n_starts,
+        "n_starts": sweep_len(z, spec),
         "steps": run.steps,
         "seconds": round(seconds, 1),
     }
@@ -272,7 +278,8 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
         "versions_repeat": _repeats([e.version for e in run.embeddings]),
     }
     # the same seed, the agent not reacting: the stream every detector scores
-    need = 20 * spec.n_starts
+    n = sweep_len(z, spec)
+    need = 20 * n
 
     def enough(r: InProcessRun, lv: _Live, t: Tap) -> bool:
         if lv.sample is None or lv.at is None:
@@ -282,10 +289,12 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
     _, blind, btap, _, _ = _run(z, ch, seed, budget, False, enough)
     if blind.sample is None:
         return row | {"stream": None}
-    post = btap.values[blind.sample : blind.sample + spec.n_starts]
-    pre = btap.values[max(0, blind.sample - spec.n_starts) : blind.sample]
+    post = btap.values[blind.sample : blind.sample + n]
+    pre = btap.values[max(0, blind.sample - n) : blind.sample]
     harm = None
-    if pre and post and np.mean(pre) > 0:
+    if hasattr(z, "harm"):  # a family whose stream is not a goal fraction says how it counts one
+        harm = z.harm(pre, post)
+    elif pre and post and np.mean(pre) > 0:
         harm = float(1.0 - np.mean(post) / np.mean(pre))
     row["harm"] = harm
     row["stream_samples"] = len(btap.values)
@@ -294,7 +303,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
     for name, make in peers(params).items():
         fa, d = score(make, btap.values, btap.resets, blind.sample)
         row[f"{name}_delay_samples"] = d
-        row[f"{name}_delay_sweeps"] = None if d is None else round((d + 1) / spec.n_starts, 3)
+        row[f"{name}_delay_sweeps"] = None if d is None else round((d + 1) / n, 3)
         row[f"{name}_false_alarms"] = fa
     return row
 
@@ -363,28 +372,32 @@ def _fmt(v: Any) -> str:
 def select(only: list[str] | None) -> list[ZooWorld]:
     """The zoo entries named (a whole label names that entry alone; else every label containing
     the name), or the default worlds; refused naming the valid ones."""
-    labels = {z.label.lower(): z for z in ZOO}
+    from sensorimotor.tools.bench.changes_families import FAMILIES
+
+    every: tuple[ZooWorld, ...] = (*ZOO, *FAMILIES)
+    labels = {z.label.lower(): z for z in every}
     if not only:
         return [labels[w.lower()] for w in DEFAULT_WORLDS]
     out: list[ZooWorld] = []
     for o in only:
-        hit = [labels[o.lower()]] if o.lower() in labels else [z for z in ZOO if o.lower() in z.label.lower()]
+        hit = [labels[o.lower()]] if o.lower() in labels else [z for z in every if o.lower() in z.label.lower()]
         if not hit:
-            raise UsageError(f"no zoo world {o!r}; valid: {', '.join(z.label for z in ZOO)}")
+            raise UsageError(f"no zoo world {o!r}; valid: {', '.join(z.label for z in every)}")
         out += [z for z in hit if z not in out]
     return out
 
 
-def pick_changes(names: list[str] | None) -> list[Change]:
-    """The changes named (by label or kind; `none`: the unperturbed run alone), or every one."""
+def pick_changes(names: list[str] | None, among: tuple[Change, ...] = CHANGES) -> list[Change]:
+    """The changes named (by label or kind; `none`: the unperturbed run alone), or every one, of
+    `among` (a world's own list: changes_families)."""
     if not names:
-        return list(CHANGES)
+        return list(among)
     if [n.lower() for n in names] == ["none"]:
         return []
-    out = [c for c in CHANGES if any(n.lower() in (c.label.lower(), c.kind) for n in names)]
-    unknown = [n for n in names if not any(n.lower() in (c.label.lower(), c.kind) for c in CHANGES)]
+    out = [c for c in among if any(n.lower() in (c.label.lower(), c.kind) for n in names)]
+    unknown = [n for n in names if not any(n.lower() in (c.label.lower(), c.kind) for c in among)]
     if unknown:
-        raise UsageError(f"no change {', '.join(unknown)}; valid: {', '.join(c.label for c in CHANGES)}, none")
+        raise UsageError(f"no change {', '.join(unknown)}; valid: {', '.join(c.label for c in among)}, none")
     return out
 
 
@@ -477,8 +490,10 @@ def main(
         if z.needs and importlib.util.find_spec(z.needs) is None:
             print(f"changes: {z.label}: skipped ({z.needs} is not installed)", file=sys.stderr)
             continue
-        chosen = pick_changes(changes) + ([NONE] if quiet or changes == ["none"] else [])
-        tasks += [(z, c, s, budget) for c in chosen for s in range(seeds)]
+        chosen = pick_changes(changes, getattr(z, "changes", ()) or CHANGES)
+        chosen += [NONE] if quiet or changes == ["none"] else []
+        b = getattr(z, "quick_budget" if quick else "budget", budget)  # a family's own budgets
+        tasks += [(z, c, s, b) for c in chosen for s in range(seeds)]
     pool = mp.get_context("spawn").Pool(workers) if workers > 1 and len(tasks) > 1 else None
     rows: list[dict[str, Any]] = []
     try:
