@@ -158,6 +158,17 @@ def _world(z: ZooWorld, seed: int) -> BodyChanges:
     return build(seed) if build is not None else BodyChanges(make_world(z.world, None, seed, z.params))
 
 
+def relearned_version(z: ZooWorld, e: Embedding, run: InProcessRun, at: int) -> bool:
+    """Whether `e` is a version of the relearned map: one that names the drop, or, for a family
+    whose program names only its first and then refines the map periodically (the retina and the
+    roving eye: changes_families), any version after a drop detected since the change at `at`."""
+    if e.drop_step is not None:
+        return True
+    return bool(getattr(z, "refines", False)) and any(
+        at < d.step <= e.step for d in run.events(EventKind.DROP_DETECTED)
+    )
+
+
 def sweep_len(z: ZooWorld, spec: Any) -> int:
     """Stream samples per sweep: the start states, or a family's own count (a world without them)."""
     return int(getattr(z, "sweep", 0) or spec.n_starts)
@@ -231,7 +242,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
         if r.steps >= live.at + budget.after:
             return True
         pre = [e for e in r.embeddings if e.step <= live.at and e.procrustes_error is not None]
-        post = [e for e in r.embeddings if e.step > live.at and e.drop_step is not None]
+        post = [e for e in r.embeddings if e.step > live.at and relearned_version(z, e, r, live.at)]
         return bool(pre and post and _error(post[-1]) <= 1.5 * _error(pre[-1]) + 1e-9)
 
     run, live, tap, spec, seconds = _run(z, ch, seed, budget, True, relearned)
@@ -255,7 +266,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
     before = [e for e in run.embeddings if e.step <= live.at and e.procrustes_error is not None]
     pre_err = _error(before[-1]) if before else None
     detected = next((d for d in drops if d > live.at), None)
-    after = [e for e in run.embeddings if e.step > live.at and e.drop_step is not None]
+    after = [e for e in run.embeddings if e.step > live.at and relearned_version(z, e, run, live.at)]
     first = after[0] if after else None
     good = next((e for e in after if pre_err is not None and _error(e) <= 1.5 * pre_err + 1e-9), None)
     row |= {

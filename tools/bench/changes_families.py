@@ -45,6 +45,7 @@ class Family(ZooWorld):
     sweep: int = 0  # stream samples per sweep when the world has no start states (0: its n_starts)
     note: str = field(default="", compare=False)
 
+    refines: bool = False  # its program names the drop in one version and then refines the map periodically
     goal_above: float | None = None  # a stream of scores: a value above this is a goal reached
 
     def harm(self, pre: list[float], post: list[float]) -> float | None:
@@ -108,15 +109,17 @@ FAMILIES: tuple[Family, ...] = (
         "rovingeye",
         changes=(Change("gain x1.5 (own)", "gain"), *_generic("reverse", "permute", "lesion action 0", "delay 1")),
         budget=Budget(25_000, 40_000, 40_000, 100_000),
-        quick_budget=Budget(2_000, 10_000, 8_000, 12_000),
+        quick_budget=Budget(15_000, 25_000, 20_000, 12_000),
+        refines=True,
     ),
     Family(
         "Retina",
         "retina",
         changes=RETINA_OWN + _generic("permute", "gain x2", "delay 1"),
-        budget=Budget(6_000, 20_000, 8_000, 20_000),
+        budget=Budget(6_000, 20_000, 6_000, 20_000),
         quick_budget=Budget(2_000, 10_000, 8_000, 12_000),
         sweep=100,
+        refines=True,
     ),
     Family(
         "Mountain car (ch. 8)",
@@ -126,7 +129,7 @@ FAMILIES: tuple[Family, ...] = (
             Change("morph: baseline 1.0 -> 1.4 m (own)", "morph", {"baseline": "1.4"}),
             *_generic("reverse", "permute", "gain x2", "lesion action 0", "delay 1"),
         ),
-        budget=Budget(0, 700_000, 150_000, 100_000),
+        budget=Budget(0, 700_000, 150_000, 400_000),
         quick_budget=Budget(0, 300_000, 60_000, 20_000),
         sweep=20,
         goal_above=-1.0,
