@@ -8,7 +8,7 @@ import pytest
 
 from sensorimotor.protocol.messages import Control
 from sensorimotor.tools.bench import changes as C
-from sensorimotor.tools.bench.changes_families import FAMILIES, NOT_BENCHED, family
+from sensorimotor.tools.bench.changes_families import FAMILIES, family
 
 pytest.importorskip("river")
 
@@ -17,10 +17,9 @@ pytest.importorskip("river")
 def test_every_change_of_a_family_is_one_its_world_takes(fam):
     with fam.build(0) as w:
         assert {c.kind for c in fam.changes} <= set(w.perturbations())
-    for ch in fam.changes:
-        with fam.build(0) as w:
-            assert w.perturb(Control(w.world_id, ch.kind, dict(ch.params)))  # applied, said how
-    assert fam.world not in NOT_BENCHED
+        for ch in fam.changes:  # each applied (and said how), then undone
+            assert w.perturb(Control(w.world_id, ch.kind, dict(ch.params)))
+            w.perturb(Control(w.world_id, "restore", {}))
 
 
 def test_a_family_is_selected_by_name_with_its_own_changes():
@@ -37,3 +36,10 @@ def test_a_reversed_gridworld_is_noticed_within_a_sweep_before_adwin_and_relearn
     assert r["detected"] and r["ours_delay_sweeps"] <= 2 and r["ours_delay_samples"] == r["delay_samples_live"]
     assert r["adwin_delay_samples"] > r["ours_delay_samples"]
     assert r["error_at_1.5x"] is not None and r["error_at_1.5x"] <= 1.5 * r["error_before"]
+
+
+def test_the_mountain_cars_harm_counts_episodes_that_reached_the_goal_before_giving_up():
+    car = family("Mountain car (ch. 8)")
+    # -(car steps) / 400 per training episode; -1: gave up at 400 car steps without the goal
+    assert car.harm([-0.3, -1.0, -0.5, -0.2], [-1.0, -1.0, -0.4, -1.0]) == pytest.approx(1 - 0.25 / 0.75)
+    assert family("Retina").harm([0.5, 0.5], [0.25, 0.25]) == 0.5 and car.harm([-1.0], [-1.0]) is None
