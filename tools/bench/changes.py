@@ -155,7 +155,24 @@ class _Live:
 
 
 def _world(z: ZooWorld, seed: int) -> BodyChanges:
-    return BodyChanges(make_world(z.world, None, seed, z.params))
+    build = getattr(z, "build", None)  # a family of our own worlds (changes_families) builds its own
+    return build(seed) if build is not None else BodyChanges(make_world(z.world, None, seed, z.params))
+
+
+def relearned_version(z: ZooWorld, e: Embedding, run: InProcessRun, at: int) -> bool:
+    """Whether `e` is a version of the relearned map: one that names the drop, or, for a family
+    whose program names only its first and then refines the map periodically (the retina and the
+    roving eye: changes_families), any version after a drop detected since the change at `at`."""
+    if e.drop_step is not None:
+        return True
+    return bool(getattr(z, "refines", False)) and any(
+        at < d.step <= e.step for d in run.events(EventKind.DROP_DETECTED)
+    )
+
+
+def sweep_len(z: ZooWorld, spec: Any) -> int:
+    """Stream samples per sweep: the start states, or a family's own count (a world without them)."""
+    return int(getattr(z, "sweep", 0) or spec.n_starts)
 
 
 def _run(
@@ -176,7 +193,7 @@ def _run(
         program = make_program(spec, seed, **z.program)
         params = dict(getattr(program, "detector_params", {}) or {})
         tap = Tap(make_detector(DEFAULT_DETECTOR, **params), react)
-        warm = int(params.get("warmup", 100)) + 2 * spec.n_starts
+        warm = int(params.get("warmup", 100)) + 2 * sweep_len(z, spec)
         live = _Live()
         t0 = time.perf_counter()
 
@@ -215,11 +232,12 @@ def _run(
         return run, live, tap, spec, time.perf_counter() - t0
 
 
-def _relearned(embeddings: list[Embedding], at: int) -> list[Embedding]:
-    """The maps of the relearned policy: the first version after the change that says it was
-    relearned after the drop, and every version after it (a later one may be better: the first
+def _relearned(z: ZooWorld, run: InProcessRun, at: int) -> list[Embedding]:
+    """The maps of the relearned policy: the first version after the change that is a relearned
+    one (`relearned_version`), and every version after it (a later one may be better: the first
     good sweep's policy can still take detours among states not all met yet)."""
-    first = next((i for i, e in enumerate(embeddings) if e.step > at and e.drop_step is not None), None)
+    embeddings = run.embeddings
+    first = next((i for i, e in enumerate(embeddings) if e.step > at and relearned_version(z, e, run, at)), None)
     return [] if first is None else [e for e in embeddings[first:] if e.procrustes_error is not None]
 
 
@@ -251,7 +269,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
         if r.steps >= live.at + budget.after:
             return True
         pre = [e for e in r.embeddings if e.step <= live.at and e.procrustes_error is not None]
-        post = _relearned(r.embeddings, live.at)
+        post = _relearned(z, r, live.at)
         if not (pre and post):
             return False
         bar = _error(pre[-1]) if fresh is None else max(_error(pre[-1]), fresh)
@@ -267,7 +285,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
         "kind": ch.kind,
         "params": ch.params,
         "seed": seed,
-        "n_starts": spec.n_starts,
+        "n_starts": sweep_len(z, spec),
         "steps": run.steps,
         "seconds": round(seconds, 1),
     }
@@ -278,7 +296,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
     before = [e for e in run.embeddings if e.step <= live.at and e.procrustes_error is not None]
     pre_err = _error(before[-1]) if before else None
     detected = next((d for d in drops if d > live.at), None)
-    after = _relearned(run.embeddings, live.at)
+    after = _relearned(z, run, live.at)
     first = after[0] if after else None
     good = next((e for e in after if pre_err is not None and _error(e) <= 1.5 * pre_err + 1e-9), None)
     ref = pre_err if fresh is None or pre_err is None else max(pre_err, fresh)
@@ -308,7 +326,8 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
         "versions_repeat": _repeats([e.version for e in run.embeddings]),
     }
     # the same seed, the agent not reacting: the stream every detector scores
-    need = 20 * spec.n_starts
+    n = sweep_len(z, spec)
+    need = 20 * n
 
     def enough(r: InProcessRun, lv: _Live, t: Tap) -> bool:
         if lv.sample is None or lv.at is None:
@@ -318,10 +337,12 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
     _, blind, btap, _, _ = _run(z, ch, seed, budget, False, enough)
     if blind.sample is None:
         return row | {"stream": None}
-    post = btap.values[blind.sample : blind.sample + spec.n_starts]
-    pre = btap.values[max(0, blind.sample - spec.n_starts) : blind.sample]
+    post = btap.values[blind.sample : blind.sample + n]
+    pre = btap.values[max(0, blind.sample - n) : blind.sample]
     harm = None
-    if pre and post and np.mean(pre) > 0:
+    if hasattr(z, "harm"):  # a family whose stream is not a goal fraction says how it counts one
+        harm = z.harm(pre, post)
+    elif pre and post and np.mean(pre) > 0:
         harm = float(1.0 - np.mean(post) / np.mean(pre))
     row["harm"] = harm
     row["stream_samples"] = len(btap.values)
@@ -330,7 +351,7 @@ def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> di
     for name, make in peers(params).items():
         fa, d = score(make, btap.values, btap.resets, blind.sample)
         row[f"{name}_delay_samples"] = d
-        row[f"{name}_delay_sweeps"] = None if d is None else round((d + 1) / spec.n_starts, 3)
+        row[f"{name}_delay_sweeps"] = None if d is None else round((d + 1) / n, 3)
         row[f"{name}_false_alarms"] = fa
     return row
 
@@ -402,28 +423,32 @@ def _fmt(v: Any) -> str:
 def select(only: list[str] | None) -> list[ZooWorld]:
     """The zoo entries named (a whole label names that entry alone; else every label containing
     the name), or the default worlds; refused naming the valid ones."""
-    labels = {z.label.lower(): z for z in ZOO}
+    from sensorimotor.tools.bench.changes_families import FAMILIES
+
+    every: tuple[ZooWorld, ...] = (*ZOO, *FAMILIES)
+    labels = {z.label.lower(): z for z in every}
     if not only:
         return [labels[w.lower()] for w in DEFAULT_WORLDS]
     out: list[ZooWorld] = []
     for o in only:
-        hit = [labels[o.lower()]] if o.lower() in labels else [z for z in ZOO if o.lower() in z.label.lower()]
+        hit = [labels[o.lower()]] if o.lower() in labels else [z for z in every if o.lower() in z.label.lower()]
         if not hit:
-            raise UsageError(f"no zoo world {o!r}; valid: {', '.join(z.label for z in ZOO)}")
+            raise UsageError(f"no zoo world {o!r}; valid: {', '.join(z.label for z in every)}")
         out += [z for z in hit if z not in out]
     return out
 
 
-def pick_changes(names: list[str] | None) -> list[Change]:
-    """The changes named (by label or kind; `none`: the unperturbed run alone), or every one."""
+def pick_changes(names: list[str] | None, among: tuple[Change, ...] = CHANGES) -> list[Change]:
+    """The changes named (by label or kind; `none`: the unperturbed run alone), or every one, of
+    `among` (a world's own list: changes_families)."""
     if not names:
-        return list(CHANGES)
+        return list(among)
     if [n.lower() for n in names] == ["none"]:
         return []
-    out = [c for c in CHANGES if any(n.lower() in (c.label.lower(), c.kind) for n in names)]
-    unknown = [n for n in names if not any(n.lower() in (c.label.lower(), c.kind) for c in CHANGES)]
+    out = [c for c in among if any(n.lower() in (c.label.lower(), c.kind) for n in names)]
+    unknown = [n for n in names if not any(n.lower() in (c.label.lower(), c.kind) for c in among)]
     if unknown:
-        raise UsageError(f"no change {', '.join(unknown)}; valid: {', '.join(c.label for c in CHANGES)}, none")
+        raise UsageError(f"no change {', '.join(unknown)}; valid: {', '.join(c.label for c in among)}, none")
     return out
 
 
@@ -521,8 +546,10 @@ def main(
         if z.needs and importlib.util.find_spec(z.needs) is None:
             print(f"changes: {z.label}: skipped ({z.needs} is not installed)", file=sys.stderr)
             continue
-        chosen = pick_changes(changes) + ([NONE] if quiet or changes == ["none"] else [])
-        tasks += [(z, c, s, budget) for c in chosen for s in range(seeds)]
+        chosen = pick_changes(changes, getattr(z, "changes", ()) or CHANGES)
+        chosen += [NONE] if quiet or changes == ["none"] else []
+        b = getattr(z, "quick_budget" if quick else "budget", budget)  # a family's own budgets
+        tasks += [(z, c, s, b) for c in chosen for s in range(seeds)]
     pool = mp.get_context("spawn").Pool(workers) if workers > 1 and len(tasks) > 1 else None
     rows: list[dict[str, Any]] = []
     try:

@@ -21,7 +21,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--world",
         action="append",
         metavar="NAME",
-        help=f"zoo worlds (a whole label, or part of labels; default: {'; '.join(changes.DEFAULT_WORLDS)})",
+        help=f"zoo worlds or the project's own (a whole label, or part of labels: Gridworld, 2 joints, Roving eye, "
+        f"Retina, Mountain car; default: {'; '.join(changes.DEFAULT_WORLDS)})",
     )
     p.add_argument(
         "--change",

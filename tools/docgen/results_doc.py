@@ -436,6 +436,18 @@ SOURCES["demo-perturb"] = Source(
 SOURCES["bench-changes"] = Source(
     "sme bench changes --seeds 3 --json", "results/bench-changes/runs.jsonl", _bench_changes("render_scorecard")
 )
+#: the project's own worlds in the scorecard (tools/bench/changes_families.py), one kept output each
+for _family, _world, _seeds in (
+    ("gridworld", "Gridworld", 3),
+    ("arm", "2 joints", 3),
+    ("rovingeye", "Roving eye", 3),
+    ("retina", "Retina", 1),
+):
+    SOURCES[f"bench-changes-{_family}"] = Source(
+        f'sme bench changes --seeds {_seeds} --world "{_world}" --json',
+        f"results/bench-changes-{_family}/runs.jsonl",
+        _bench_changes("render_scorecard"),
+    )
 SOURCES["bench-changes-life"] = Source(
     "sme bench changes --life 20 --seeds 1 --json",
     "results/bench-changes-life/runs.jsonl",
