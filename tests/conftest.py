@@ -49,6 +49,26 @@ LONGEST_FIRST = (
 )
 
 
+@pytest.fixture(autouse=True)
+def _alone_when_marked(request: pytest.FixtureRequest):
+    """Under xdist, a test marked `alone` (its figures depend on the machine's load: exact counts
+    under a flood, rates) runs while the other worker waits: it holds the session's lock file
+    exclusively, every other test holds it shared. Without xdist nothing is locked."""
+    uid = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    if uid is None:
+        yield
+        return
+    import fcntl
+    import tempfile
+
+    with open(Path(tempfile.gettempdir()) / f"sme-pytest-{uid}.lock", "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX if request.node.get_closest_marker("alone") else fcntl.LOCK_SH)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Put the files of LONGEST_FIRST first, in its order; the rest keep theirs (a stable sort)."""
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
