@@ -65,6 +65,7 @@ def test_observation_step_is_read_without_decoding() -> None:
 
 
 @pytest.mark.integration
+@pytest.mark.alone
 def test_a_frozen_recorder_does_not_slow_the_world(procs, endpoint, tmp_path) -> None:
     agent = procs.start("agent", "--listen", endpoint, "--workers", "1", "-q", stdout=subprocess.DEVNULL)
     world = procs.start("world", "bench", "--connect", endpoint, "-q", stdout=subprocess.DEVNULL)

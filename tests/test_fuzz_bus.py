@@ -21,6 +21,7 @@ from sensorimotor.tools.bench.fuzz import (
 
 
 @pytest.mark.integration
+@pytest.mark.alone
 def test_fuzz_2000_messages_all_counted_no_crash_good_world_learns():
     # two worker processes whatever the cores here: with workers, truth and events of a world answered
     # by another worker were counted twice and broken worlds made an owner hand a healthy one off
@@ -52,6 +53,7 @@ def test_fuzz_refuses_unknown_categories_before_starting_anything():
 
 
 @pytest.mark.integration
+@pytest.mark.alone
 def test_fuzz_of_hundreds_of_fake_worlds_is_counted_and_never_stops_the_agent():
     # issue 41: once ~260 fake world tokens were up, the agent's liveliness audit locked its router
     # session (no status answer, no answer to the worlds) and the bench died in `good_steps`; and

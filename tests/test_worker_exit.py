@@ -258,6 +258,7 @@ with Bus(BusConfig.for_role("agent", ep)) as r, Bus(BusConfig.for_role("tool", e
 
 
 @pytest.mark.integration
+@pytest.mark.alone
 def test_a_liveliness_query_for_more_than_256_tokens_returns_on_a_session_that_watches_them(endpoint) -> None:
     """zenoh's default reply channel holds 256 replies, and a session that watches the tokens gets
     them delivered inside the query call: the 257th blocked it forever (the agent's audit)."""
