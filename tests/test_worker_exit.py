@@ -247,11 +247,16 @@ with Bus(BusConfig.for_role("agent", ep)) as r, Bus(BusConfig.for_role("tool", e
         seen = set()
         q.watch_alive(keys.ALL_CLAIMS, lambda k, alive: seen.add(k), history=True)
         assert wait_for(lambda: len(seen) == 300, 20)
-        got = []
-        t = threading.Thread(target=lambda: got.append(len(q.alive(keys.ALL_CLAIMS, timeout=2.0))), daemon=True)
-        t.start()
-        t.join(15)
-        print(got[0] if got else "hung", flush=True)
+        answers = []
+        for _ in range(3):  # an empty answer is zenoh's (see the next test); a hang is the fault
+            got = []
+            t = threading.Thread(target=lambda: got.append(len(q.alive(keys.ALL_CLAIMS, timeout=2.0))), daemon=True)
+            t.start()
+            t.join(15)
+            answers.append(got[0] if got else "hung")
+            if answers[-1] != 0:
+                break
+        print(answers[-1], answers, flush=True)
         import os
         os._exit(0)  # (a hung session would not close)
 """
@@ -265,7 +270,7 @@ def test_a_liveliness_query_for_more_than_256_tokens_returns_on_a_session_that_w
     out = subprocess.run(
         [sys.executable, "-c", LIVELINESS, endpoint], cwd=ROOT, capture_output=True, text=True, timeout=120
     )
-    assert out.stdout.strip() == "300", (out.stdout, out.stderr[-2000:])
+    assert out.stdout.split()[0] == "300", (out.stdout, out.stderr[-2000:])
 
 
 @pytest.mark.integration

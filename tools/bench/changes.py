@@ -21,7 +21,7 @@ import json
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,34 +29,13 @@ import numpy as np
 from sensorimotor.agent.detectors import DEFAULT_DETECTOR, DropDetector, make_detector
 from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol.messages import Control, Embedding, EventKind
+from sensorimotor.tools.bench.changes_families import FAMILIES
+from sensorimotor.tools.bench.changes_kinds import CHANGES, FULL, NONE, QUICK, Budget, Change
 from sensorimotor.tools.bench.zoo import ZOO, ZooWorld
 from sensorimotor.tools.common import UsageError, require
 from sensorimotor.tools.inprocess import InProcessRun, run_inprocess
 from sensorimotor.worlds.body_changes.layer import BodyChanges
 from sensorimotor.worlds.registry import make_world
-
-
-@dataclass(frozen=True)
-class Change:
-    """One change of the scorecard: a label, the Control kind and its parameters (kind None: no
-    change, an unperturbed run that counts false alarms)."""
-
-    label: str
-    kind: str | None
-    params: dict[str, str] = field(default_factory=dict)
-
-
-#: Every generic kind with its default parameters (restore undoes one: it is the life's business)
-CHANGES: tuple[Change, ...] = (
-    Change("reverse", "reverse"),
-    Change("permute", "permute"),
-    Change("gain x2", "gain"),
-    Change("lesion action 0", "lesion"),
-    Change("lesion sensor (first half)", "lesion", {"what": "sensor"}),
-    Change("noise sd 0.05", "noise"),
-    Change("delay 1", "delay"),
-)
-NONE = Change("none (unperturbed)", None)
 
 #: The zoo worlds the scorecard runs by default: deterministic worlds whose map converges
 DEFAULT_WORLDS = (
@@ -65,20 +44,6 @@ DEFAULT_WORLDS = (
     "MiniGrid Empty 8x8",
     "FrozenLake random 10x10 (map 0), not slippery",
 )
-
-
-@dataclass(frozen=True)
-class Budget:
-    """Steps: the least before a change, the most to wait for the policy to be watched, the most
-    after the change, and the unperturbed run's length."""
-
-    before: int = 5_000
-    ready_by: int = 60_000
-    after: int = 40_000
-    quiet: int = 100_000
-
-
-QUICK = Budget(2_000, 20_000, 15_000, 20_000)
 
 
 class Tap:
@@ -257,7 +222,7 @@ def from_scratch(z: ZooWorld, ch: Change, seed: int, budget: Budget) -> float | 
     return _error(maps[-1]) if maps else None
 
 
-def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = Budget()) -> dict[str, Any]:
+def run_one(z: ZooWorld, ch: Change, seed: int, budget: Budget = FULL) -> dict[str, Any]:
     """One (world, change, seed) of the scorecard: the changed body learned from scratch (its
     reference), the live run (the agent notices and relearns) and, for a change, the same seed
     again with the agent not reacting (the detectors' stream)."""
@@ -423,8 +388,6 @@ def _fmt(v: Any) -> str:
 def select(only: list[str] | None) -> list[ZooWorld]:
     """The zoo entries named (a whole label names that entry alone; else every label containing
     the name), or the default worlds; refused naming the valid ones."""
-    from sensorimotor.tools.bench.changes_families import FAMILIES
-
     every: tuple[ZooWorld, ...] = (*ZOO, *FAMILIES)
     labels = {z.label.lower(): z for z in every}
     if not only:

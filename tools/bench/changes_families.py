@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.protocol.messages import WorldSpec
-from sensorimotor.tools.bench.changes import CHANGES, QUICK, Budget, Change
+from sensorimotor.tools.bench.changes_kinds import CHANGES, QUICK, Budget, Change
 from sensorimotor.tools.bench.zoo import ZooWorld
 from sensorimotor.worlds.body_changes.layer import BodyChanges
 from sensorimotor.worlds.registry import make_world
