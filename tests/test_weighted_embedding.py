@@ -1,8 +1,6 @@
 """The moves distance and weighted MDS (agent.embedding.move_counts, weighted_mds): identities, and
 the map of a room with a wall, where the edit distance + classical MDS bends the cells round it."""
 
-from collections import deque
-
 import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
@@ -11,34 +9,16 @@ from sensorimotor.agent.embedding import classical_mds, procrustes_error, trace_
 from sensorimotor.agent.embedding.move_counts import move_count_distances, move_counts
 from sensorimotor.agent.embedding.weighted_mds import distance_weights, weighted_mds
 from sensorimotor.agent.programs.generic_jobs import embed_job
-
-MOVES = ((1, 0), (0, 1), (-1, 0), (0, -1))  # east, south, west, north: actions 0..3
+from sensorimotor.tools.experiments.geodesic_ceiling import shortest_traces as ceiling_traces
 
 
 def shortest_traces(rows: list[str]) -> tuple[np.ndarray, list[list[int]]]:
     """The free cells ('.') of a layout and each one's shortest way to the goal ('G'), as actions
-    (breadth-first from the goal; ties broken by action order: a deterministic optimal policy)."""
+    (geodesic_ceiling's breadth-first search from the goal: a deterministic optimal policy)."""
     free = {(x, y) for y, r in enumerate(rows) for x, c in enumerate(r) if c in ".G"}
     goal = next((x, y) for y, r in enumerate(rows) for x, c in enumerate(r) if c == "G")
-    dist = {goal: 0}
-    queue = deque([goal])
-    while queue:
-        a = queue.popleft()
-        for dx, dy in MOVES:
-            b = (a[0] + dx, a[1] + dy)
-            if b in free and b not in dist:
-                dist[b] = dist[a] + 1
-                queue.append(b)
     cells = sorted((c for c in free if c != goal), key=lambda c: (c[1], c[0]))
-    traces = []
-    for c in cells:
-        t, at = [], c
-        while at != goal:
-            a = next(i for i, (dx, dy) in enumerate(MOVES) if dist.get((at[0] + dx, at[1] + dy), -2) == dist[at] - 1)
-            t.append(a)
-            at = (at[0] + MOVES[a][0], at[1] + MOVES[a][1])
-        traces.append(t)
-    return np.array(cells, dtype=np.float64), traces
+    return np.array(cells, dtype=np.float64), ceiling_traces(cells, free, goal)
 
 
 #: SimpleCrossing S9N1's layout of seed 0: a corridor along the top joined to the room at its left end
