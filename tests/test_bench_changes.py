@@ -15,7 +15,7 @@ from sensorimotor.tools.commands.demo import change_summary, parse_perturb
 from sensorimotor.tools.commands.watch import change_mark
 from sensorimotor.tools.common import UsageError
 
-pytest.importorskip("river")
+pytest.importorskip("river", reason="ADWIN and Page-Hinkley come from river: pip install -e '.[experiments]'")
 pytest.importorskip("gymnasium")
 
 #: a small lake, plans every 250 new samples (the relearning pace is 27 of them: see docs/body-changes.md)

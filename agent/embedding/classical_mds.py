@@ -72,6 +72,20 @@ def double_centre(D: np.ndarray, overwrite: bool = False) -> tuple[np.ndarray, n
     return K, col
 
 
+def check_distances(D: np.ndarray, k: int) -> np.ndarray:
+    """`D` as an array (its dtype kept), refused unless it is a square, finite distance matrix with
+    1 <= k <= n."""
+    D = np.asarray(D)
+    if D.ndim != 2 or D.shape[0] != D.shape[1]:
+        raise ValueError(f"distance matrix must be square, got shape {D.shape}")
+    n = D.shape[0]
+    if not 1 <= k <= n:
+        raise ValueError(f"k must be in 1..{n}, got {k}")
+    if not np.isfinite(D).all():
+        raise ValueError("distance matrix contains NaN or inf")
+    return D
+
+
 def classical_mds(D: np.ndarray, k: int = 2, method: str = "auto", overwrite: bool = False) -> MDSResult:
     """Classical (Torgerson) MDS of a distance matrix.
 
@@ -107,14 +121,8 @@ def classical_mds(D: np.ndarray, k: int = 2, method: str = "auto", overwrite: bo
         res = classical_mds(cdist(X, X), k=2)  # res.coordinates: [50, 2]
         y = res.model.transform(cdist([[0.5, 0.5]], X))  # [1, 2], in the same frame
     """
-    D = np.asarray(D)
-    if D.ndim != 2 or D.shape[0] != D.shape[1]:
-        raise ValueError(f"distance matrix must be square, got shape {D.shape}")
+    D = check_distances(D, k)
     n = D.shape[0]
-    if not 1 <= k <= n:
-        raise ValueError(f"k must be in 1..{n}, got {k}")
-    if not np.isfinite(D).all():
-        raise ValueError("distance matrix contains NaN or inf")
     if method == "auto":
         method = "full" if n <= FULL_BELOW or k >= n - 1 else "topk"
     if method not in ("full", "topk"):

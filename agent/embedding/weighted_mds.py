@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from sensorimotor.agent.embedding.classical_mds import classical_mds
+from sensorimotor.agent.embedding.classical_mds import check_distances, classical_mds
 
 #: the default weight exponent: w_ij = d_ij^-2 (Sammon-like)
 POWER = 2.0
@@ -85,14 +85,8 @@ def weighted_mds(
     ValueError
         If `D` is not square or not finite, `k` is out of range, or shapes disagree.
     """
-    D = np.asarray(D, dtype=np.float64)
-    if D.ndim != 2 or D.shape[0] != D.shape[1]:
-        raise ValueError(f"distance matrix must be square, got shape {D.shape}")
+    D = check_distances(np.asarray(D, dtype=np.float64), k)
     n = D.shape[0]
-    if not 1 <= k <= n:
-        raise ValueError(f"k must be in 1..{n}, got {k}")
-    if not np.isfinite(D).all():
-        raise ValueError("distance matrix contains NaN or inf")
     W = distance_weights(D, power) if weights is None else np.array(weights, dtype=np.float64)
     if W.shape != D.shape or (W < 0).any():
         raise ValueError(f"weights must be non-negative and of shape {D.shape}")
