@@ -380,6 +380,22 @@ def test_warm_up_moves_span_motor_scale_while_the_plan_moves_span_action_scale()
     assert embs[-1].procrustes_error < 0.05, [e.procrustes_error for e in embs]
 
 
+def test_at_the_defaults_camera_frames_of_a_lagging_body_take_half_moves_and_of_an_exact_one_whole():
+    """`action_scale=0` over camera frames: once the motor map is fitted, the warm-up's probe of whole
+    then half moves runs in its coordinates; a spot that follows at most half a move per step (as
+    panda-gym's hand) gets half moves, one that follows every move exactly keeps whole moves."""
+    said, errors = {}, {}
+    for env in ("Spot-v0", "SpotLag-v0"):
+        with make_world(f"gym:tests.spot_env:zoo-test/{env}", "spot", 0) as w:
+            program = make_program(w.spec(), 0, motor_warmup="1500", embed_every="2000")
+            run = run_inprocess(w, program, 9_000)
+        said[env] = {e.reason: e.detail for e in run.events(EventKind.POLICY_ITERATION)}
+        errors[env] = [e.procrustes_error for e in run.embeddings if e.procrustes_error is not None]
+        assert float(np.abs(program.actions).max()) == (0.5 if env == "SpotLag-v0" else 1.0), said[env]
+        assert "net_moves" in said[env] and errors[env] and errors[env][-1] < 0.05, (said[env], errors[env])
+    assert "whole moves" in said["Spot-v0"]["move_scale"] and "half moves" in said["SpotLag-v0"]["move_scale"], said
+
+
 def test_gain_replays_the_accepted_traces_and_measures_how_far_a_command_moves_the_body():
     """`gym_embed --gain`: on a body whose moves are exactly 0.05 x the command, the gain found is
     that, and the net moves embed the starts as well as the displacements sensed."""

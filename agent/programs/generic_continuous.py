@@ -70,7 +70,7 @@ class GenericContinuous(GenericBase):
             self._lo, self._span = np.zeros(d), np.ones(d)
         self.planner = self._new_planner(d)
         self._scale = prm.action_scale or 1.0
-        if prm.action_scale == 0 and not self.discrete and not self.motor and prm.sarsa_warmup >= 4:
+        if prm.action_scale == 0 and not self.discrete and prm.sarsa_warmup >= 4:
             self._probe, self._half_actions = [], action_table(self.spec, prm.action_levels, 0.5)
         self._seen_lo, self._seen_hi, self._warm = np.full(d, np.inf), np.full(d, -np.inf), 0
         return TabularBasis(1, self.n_actions), d  # the basis is unused: LSPI keeps the program's shape uniform
@@ -114,7 +114,7 @@ class GenericContinuous(GenericBase):
         over those ranges (widened by a tenth of their span on each side). The planner's, with
         `action_scale=0`: whole moves, then half moves if a whole one was not carried out faithfully
         (`box_moves`), each step kept to measure it."""
-        x = self._flat(obs)
+        x = self._motor_map(self._raw(obs)) if self._motor_map is not None else self._flat(obs)
         self._seen_lo, self._seen_hi = np.minimum(self._seen_lo, x), np.maximum(self._seen_hi, x)
         if obs.t == 0:
             self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
@@ -221,7 +221,9 @@ class GenericContinuous(GenericBase):
         self._seen_lo, self._seen_hi = result["seen_lo"], result["seen_hi"]
         self._start_lo, self._start_hi = result["start_lo"], result["start_hi"]
         self._set_ranges()
-        self._warm = max(self._warm, self.params.sarsa_warmup)
+        # `action_scale=0`: the warm-up's probe of whole then half moves runs on in the motor
+        # coordinates (frames say nothing of a move until they are mapped)
+        self._warm = 0 if self._probe is not None else max(self._warm, self.params.sarsa_warmup)
         self._motor_prev = None
 
     def _sarsa_update(self, obs: Observation, px: np.ndarray, pa: int, x: np.ndarray, a: int | None) -> None:
