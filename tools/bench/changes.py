@@ -371,6 +371,7 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "relearned_within_1.5x": sum(r.get("steps_to_1.5x") is not None for r in applied if r.get("detected")),
             "fresh_error": med("fresh_error"),
             "steps_to_reference": med("steps_to_reference"),
+            "error_at_reference": med("error_at_reference"),
             "within_reference": sum(r.get("steps_to_reference") is not None for r in applied if r.get("detected")),
         }
         ours, adwin = s["delay_sweeps"], s["adwin_delay_sweeps"]
@@ -426,10 +427,12 @@ def render_scorecard(src: Any, text: str) -> str:
     """The docs' table (tools/docgen/results_doc.py): one row per (world, change) summary line of the kept
     output, each with the command that gives it alone."""
     rows = [json.loads(ln) for ln in text.splitlines() if ln.strip().startswith("{")]
+    runs = [r for r in rows if not r.get("summary")]
+    rows = summary(runs) if runs else rows  # from the runs themselves: every figure the code now reports
     head = (
         "| world | change | harm | missed / harmful | delay: steps | sweeps | ADWIN | Page-Hinkley | ours / ADWIN "
-        "| false alarms / 100k steps | steps to relearned | relearned error (before; from scratch) "
-        "| within 1.5x: of before | of the changed body | command |"
+        "| false alarms / 100k steps | first map after: steps | its error | within 1.5x of the changed body: steps "
+        "| its error (before; from scratch) | within 1.5x: of before | of the changed body | command |"
     )
     out = [head, "|" + "---|" * head.count(" | ") + "---|"]
 
@@ -446,7 +449,7 @@ def render_scorecard(src: Any, text: str) -> str:
         if r["change"] == NONE.label:
             out.append(
                 f"| {r['world']} | {r['change']} | | | | | | | | {f(r['false_alarms_per_100k'])} "
-                f"in {r['unperturbed_steps']:,} | | | | | {cmd} |"
+                f"in {r['unperturbed_steps']:,} | | | | | | | {cmd} |"
             )
             continue
         out.append(
@@ -454,7 +457,8 @@ def render_scorecard(src: Any, text: str) -> str:
             f"| {f(r['delay_steps'])} | {f(r['delay_sweeps'], 2)} | {f(r['adwin_delay_sweeps'], 2)} "
             f"| {f(r['page_hinkley_delay_sweeps'], 2)} | {f(r['ours_over_adwin'], 2)} "
             f"| {f(r['false_alarms_per_100k'])} in {r['unperturbed_steps']:,} | {f(r['steps_to_relearned'])} "
-            f"| {f(r['relearned_error'])} ({f(r['error_before'])}; {f(r.get('fresh_error'))}) "
+            f"| {f(r['relearned_error'])} | {f(r.get('steps_to_reference'))} "
+            f"| {f(r.get('error_at_reference'))} ({f(r['error_before'])}; {f(r.get('fresh_error'))}) "
             f"| {r['relearned_within_1.5x']} of {r['detected']} | {g(r.get('within_reference'))} of {r['detected']} "
             f"| {cmd} |"
         )
