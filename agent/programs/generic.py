@@ -44,7 +44,8 @@ The learner follows the observation (`learner=auto`; the attach event says which
 
 Box action spaces are discretised into `action_levels` values per dimension, spanning `action_scale`
 of each bound (0, the default: whole moves, or half moves where the planner's warm-up finds the body
-carries them out more faithfully, as panda-gym's hand; `agent.programs.box_moves`); their traces are
+carries them out more faithfully, as panda-gym's hand, in the motor coordinates over camera frames;
+`agent.programs.box_moves`); their traces are
 the continuous actions sent, compared with the padded sum (Eq 3.1) or dynamic time warping
 (`distance=dtw`, with a cost per repeated step so trace length stays in it), or by the distance
 between their sums (`distance=net`: the net move commanded, blind to the order of the moves, for

@@ -114,8 +114,8 @@ class GenericProgramParams:
         0.0,
         "box actions: the discretised values span this fraction of each bound, about the box's middle "
         "(smaller moves: finer traces, for a body that follows small moves more faithfully); 0: whole "
-        "moves, except for the planner over the observation when its warm-up finds half moves carried out "
-        "more faithfully (a linear fit of the moves sent leaves over a quarter of a whole move's step "
+        "moves, except for the planner when its warm-up (over camera frames: in the motor coordinates) finds half "
+        "moves carried out more faithfully (a linear fit of the moves sent leaves over a quarter of a whole move's step "
         "unexplained, and at least a tenth less of a half move's: agent.programs.box_moves)",
         min=0.0,
         max=1.0,
