@@ -46,6 +46,23 @@ def test_a_life_of_changes_keeps_its_pace_and_memory():
     assert r["rss_growth"] < 0.1
 
 
+def test_a_life_of_the_roving_eye_waits_for_each_refined_map_to_come_back():
+    """A family of the project's own (served with its own program, first changed once its scorecard's
+    map converged): the roving eye names a drop in a rough map and then refines it, so a change
+    counts as relearned once the map is within 1.5x of its error before the change."""
+    from sensorimotor.tools.bench.changes_families import family
+
+    eye = family("Roving eye")
+    assert eye is not None and eye.refines
+    r = life(eye, 2, 0, LifeBudget(1_000, 8_000, 200))
+    assert r["changes"] == r["detected"] == r["relearned"] == 2, r["per_change"]
+    first = r["per_change"][0]
+    assert first["at"] >= eye.budget.before and first["error_before"] < 1e-3
+    for c in r["per_change"]:
+        assert c["relearned_error"] <= 1.5 * c["error_before"] + 1e-12, c
+        assert c["to_relearn"] > 1_000  # not the rough map the drop is named in (1,000 jumps after it)
+
+
 def test_scoring_counts_false_alarms_and_delay_and_restarts_at_the_resets():
     x = [1.0] * 200 + [0.0] * 100  # (ADWIN looks every 32 samples)
     fa, d = C.score(lambda: C.peers({"warmup": 30, "rate": 0.05})["ours"](), x, [], 200)

@@ -15,7 +15,7 @@ import json
 import os
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -24,6 +24,7 @@ from sensorimotor.agent.detectors import DEFAULT_DETECTOR, make_detector
 from sensorimotor.agent.programs.registry import make_program
 from sensorimotor.protocol.messages import Control, Embedding, EventKind
 from sensorimotor.tools.bench.changes import DEFAULT_WORLDS, Tap, select
+from sensorimotor.tools.bench.changes_families import Family
 from sensorimotor.tools.bench.procstat import proc_sample
 from sensorimotor.tools.bench.zoo import ZooWorld
 from sensorimotor.tools.inprocess import run_inprocess
@@ -42,6 +43,7 @@ class LifeChange:
     params: dict[str, str]
     at: int
     rss_mb: float
+    error_before: float | None = None
     detected: int | None = None
     relearned: int | None = None
     relearned_error: float | None = None
@@ -86,9 +88,18 @@ class _State:
 
 
 def life(z: ZooWorld, n: int, seed: int, budget: LifeBudget = LifeBudget()) -> dict[str, Any]:
-    """One life of `n` changes on zoo world `z`, seeded."""
+    """One life of `n` changes on zoo world `z` (or a family of the project's own worlds: served as
+    the scorecard serves it, first changed no sooner than its scorecard's first change, each change
+    given as long as the scorecard gives it), seeded."""
     rng = np.random.default_rng(seed)
-    w = BodyChanges(make_world(z.world, None, seed, z.params))
+    refines = isinstance(z, Family) and z.refines
+    if isinstance(z, Family):
+        w = z.build(seed)
+        budget = replace(
+            budget, before=max(budget.before, z.budget.before), per_change=max(budget.per_change, z.budget.after)
+        )
+    else:
+        w = BodyChanges(make_world(z.world, None, seed, z.params))
     st = _State()
     versions: list[int] = []
     errors_before: list[float] = []
@@ -102,12 +113,21 @@ def life(z: ZooWorld, n: int, seed: int, budget: LifeBudget = LifeBudget()) -> d
         t0 = time.perf_counter()
         last_emb: list[Embedding] = []
 
+        def relearned(e: Embedding, cur: LifeChange) -> bool:
+            """The relearned map: the version that names the drop; of a program that names it in a
+            rough map and then refines it (the roving eye), the first within 1.5x of the error before."""
+            if not refines:
+                return e.drop_step is not None
+            return e.procrustes_error is not None and (
+                cur.error_before is None or e.procrustes_error <= 1.5 * cur.error_before + 1e-12
+            )
+
         def on_output(msg: Any) -> None:
             cur = st.changes[-1] if st.changes else None
             if isinstance(msg, Embedding):
                 versions.append(msg.version)
                 last_emb[:] = [msg]
-                if cur is not None and cur.detected is not None and cur.relearned is None and msg.drop_step is not None:
+                if cur is not None and cur.detected is not None and cur.relearned is None and relearned(msg, cur):
                     cur.relearned, cur.relearned_error = msg.step, msg.procrustes_error
             elif getattr(msg, "kind", None) == EventKind.DROP_DETECTED and cur is not None and cur.detected is None:
                 cur.detected = msg.step
@@ -123,9 +143,11 @@ def life(z: ZooWorld, n: int, seed: int, budget: LifeBudget = LifeBudget()) -> d
             i = len(st.changes)
             kind, prm = ("restore", {}) if i % 2 else draw(rng, n_actions)
             rss = proc_sample(os.getpid())
+            before = None
             if last_emb and last_emb[0].procrustes_error is not None:
-                errors_before.append(float(last_emb[0].procrustes_error))
-            st.changes.append(LifeChange(kind, prm, k, round(rss[0], 1) if rss else float("nan")))
+                before = float(last_emb[0].procrustes_error)
+                errors_before.append(before)
+            st.changes.append(LifeChange(kind, prm, k, round(rss[0], 1) if rss else float("nan"), before))
             return Control(w.world_id, kind, prm)
 
         def done(r: Any) -> bool:

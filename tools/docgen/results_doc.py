@@ -453,6 +453,11 @@ SOURCES["bench-changes-life"] = Source(
     "results/bench-changes-life/runs.jsonl",
     _bench_changes("render_life"),
 )
+SOURCES["bench-changes-life-families"] = Source(
+    'sme bench changes --life 20 --seeds 1 --json --world Gridworld --world "2 joints" --world "Roving eye"',
+    "results/bench-changes-life/families.jsonl",
+    _bench_changes("render_life"),
+)
 #: `sme reproduce all --quick --runs 10 --out docs/reproduce/report-quick`: its summary and chapter tables
 QUICK_ALL = "sme reproduce all --quick --runs 10"
 SOURCES["report-quick"] = Source(QUICK_ALL, "reproduce/report-quick/run.json", report_summary)
