@@ -59,14 +59,34 @@ def _alone_when_marked(request: pytest.FixtureRequest):
         yield
         return
     import fcntl
-    import tempfile
 
-    with open(Path(tempfile.gettempdir()) / f"sme-pytest-{uid}.lock", "a") as f:
+    with open(_lock_path(uid), "a") as f:
         fcntl.flock(f, fcntl.LOCK_EX if request.node.get_closest_marker("alone") else fcntl.LOCK_SH)
         try:
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _lock_path(uid: str) -> Path:
+    import tempfile
+
+    return Path(tempfile.gettempdir()) / f"sme-pytest-{uid}.lock"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The xdist controller names the run (as xdist would, a fresh uuid) so that it knows the lock
+    file its workers share, and removes it at the end (`pytest_unconfigure`)."""
+    if not hasattr(config, "workerinput") and hasattr(config.option, "testrunuid") and not config.option.testrunuid:
+        import uuid
+
+        config.option.testrunuid = uuid.uuid4().hex
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    uid = getattr(config.option, "testrunuid", None)
+    if uid and not hasattr(config, "workerinput"):
+        _lock_path(uid).unlink(missing_ok=True)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
