@@ -119,7 +119,7 @@ FAMILIES: tuple[Family, ...] = (
         "Retina",
         "retina",
         changes=RETINA_OWN + _generic("permute", "gain x2", "delay 1"),
-        budget=Budget(6_000, 20_000, 6_000, 20_000),
+        budget=Budget(6_000, 20_000, 6_000, 34_000),  # 3 seeds: 102,000 unperturbed saccades
         quick_budget=Budget(2_000, 10_000, 8_000, 12_000),
         sweep=100,
         refines=True,
