@@ -43,3 +43,15 @@ def test_the_mountain_cars_harm_counts_episodes_that_reached_the_goal_before_giv
     # -(car steps) / 400 per training episode; -1: gave up at 400 car steps without the goal
     assert car.harm([-0.3, -1.0, -0.5, -0.2], [-1.0, -1.0, -0.4, -1.0]) == pytest.approx(1 - 0.25 / 0.75)
     assert family("Retina").harm([0.5, 0.5], [0.25, 0.25]) == 0.5 and car.harm([-1.0], [-1.0]) is None
+
+
+def test_a_gridworld_that_lost_a_motor_is_relearned_to_the_map_its_body_can_draw():
+    """`lesion action 0`: 36 of the 81 starts can no longer reach the goal, so no policy reaches
+    `watch_after` of them; once its model is complete the plan is the best the body allows, and
+    that policy's map is published as the relearned one (the changed body's own, as from scratch)
+    and watched."""
+    g = family("Gridworld 9x9 (generic program)")
+    r = C.run_one(g, C.pick_changes(["lesion action 0"], g.changes)[0], 0, C.Budget(1_000, 8_000, 12_000, 0))
+    assert r["applied"] and r["detected"] and 0.4 < r["harm"] < 0.6, r
+    assert r["steps_to_relearned"] is not None and r["fresh_error"] is not None, r
+    assert r["relearned_error"] <= 1.5 * max(r["fresh_error"], r["error_before"]), r

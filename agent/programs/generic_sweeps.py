@@ -19,8 +19,9 @@ trace scores, never the program's own experiments: in a deterministic world 0 fo
 goal the accepted policy reached and no longer does (twice: the start is run once more first), else
 1; in a stochastic one gamma^length at the goal, else 0. On a drop the samples and policy are
 dropped, the policy relearned from fresh experience and the first good embedding after it (in a
-stochastic world that settles below `watch_after`: the settled policy's map, published again) says
-`relearned`.
+stochastic world that settles below `watch_after`: the settled policy's map, published again; in a
+deterministic one whose changed body cannot reach `watch_after`: the exact plan of a complete model,
+the best that body allows) says `relearned`.
 """
 
 from __future__ import annotations
@@ -224,7 +225,11 @@ class GenericSweeps(GenericRelearn):
         self._trace_distance(step)  # `distance=auto`: this sweep's traces may settle it (generic_continuous)
         new = sweep_score(sw.reached, sw.traces)
         score = (new.fraction, new.length)
-        good = new.fraction >= self.params.watch_after
+        exact = self._exact_plan()
+        # after a drop, the exact plan of a complete model is the best the changed body allows, even
+        # where it reaches fewer than `watch_after` of the starts (a lesioned motor, a start walled
+        # in): its map is the relearned one, and it is watched for the next change
+        good = new.fraction >= self.params.watch_after or (self.relearn_at is not None and exact and new.fraction > 0)
         best = self._best
         disparity = end_disparity(self._ends)
         if self._by_ends() and disparity is not None and self._best_disparity is not None:
@@ -258,7 +263,6 @@ class GenericSweeps(GenericRelearn):
         # scores held back as their traces ended (see `_sweep_act`) are fed when they are absolute
         # (a stochastic world, or nothing accepted yet), never when relative to the accepted traces
         absolute = self.stochastic or self._accepted_reached is None
-        exact = self._exact_plan()
         if self._watching and not self._checking and better and not same and self.tabular and not self.stochastic:
             if traces != self._candidate_traces and not exact:
                 # a better policy, seen once: published when the next policy iteration keeps its
