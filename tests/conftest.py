@@ -68,6 +68,9 @@ def _alone_when_marked(request: pytest.FixtureRequest):
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
+_OWN_UID = pytest.StashKey[str]()
+
+
 def _lock_path(uid: str) -> Path:
     import tempfile
 
@@ -80,12 +83,12 @@ def pytest_configure(config: pytest.Config) -> None:
     if not hasattr(config, "workerinput") and hasattr(config.option, "testrunuid") and not config.option.testrunuid:
         import uuid
 
-        config.option.testrunuid = uuid.uuid4().hex
+        config.option.testrunuid = config.stash[_OWN_UID] = uuid.uuid4().hex
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
-    uid = getattr(config.option, "testrunuid", None)
-    if uid and not hasattr(config, "workerinput"):
+    uid = config.stash.get(_OWN_UID, None)  # only the run's own name: one given by --testrunuid may be shared
+    if uid:
         _lock_path(uid).unlink(missing_ok=True)
 
 

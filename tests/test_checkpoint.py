@@ -119,6 +119,13 @@ def vergence():
     return VergenceWorld(seed=0)
 
 
+def spot_lag():
+    """Camera frames of a lagging spot (tests/spot_env.py): saved in the move-size probe's second half."""
+    from sensorimotor.worlds.registry import make_world
+
+    return make_world("gym:tests.spot_env:zoo-test/SpotLag-v0", "spot", 0)
+
+
 def beacons():
     from tests.test_generic_program import Beacons
 
@@ -139,6 +146,8 @@ CASES = {
     # the model learner, saved while it explores (its counts, plan in flight and way to the untried)
     "generic-model": (grid, "generic", {"samples_per_iteration": 200}, 300, 1500, 1),
     "retina": (retina, None, {"embed_every": 200}, 700, 500, 1),
+    # the planner over camera frames, saved while it probes half moves in the motor coordinates
+    "generic-frames": (spot_lag, "generic", {"motor_warmup": 1500, "embed_every": 2000}, 2300, 1500, 0),
     "vergence": (vergence, None, {"samples_per_iteration": 100}, 1500, 1500, 1),
     # reaches the driving stage (Sarsa, Kalman filter) before the checkpoint; episodes end, are
     # watched and evaluated after it

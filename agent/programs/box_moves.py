@@ -15,8 +15,9 @@ are compared by their net move (`distance=auto`), and how large a move the plann
   faithfully. The planner's warm-up of random moves measures, over its first half of whole moves,
   the share of each step's displacement that a linear fit of the moves sent leaves unexplained;
   above `UNFAITHFUL` the second half takes half moves, and the plan takes half moves when they
-  leave at least `BETTER` less unexplained. A body that follows its moves keeps whole moves (and
-  the warm-up is the same as before: whole moves throughout).
+  leave at least `BETTER` less unexplained. A body that follows its moves keeps whole moves (its
+  warm-up is whole moves throughout). Over camera frames the probe runs once the motor map is
+  fitted, in its coordinates (a frame says nothing of a move until it is mapped).
 """
 
 from __future__ import annotations

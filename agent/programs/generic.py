@@ -168,6 +168,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         self._said_no_starts = False
         self.detector_params = {"warmup": max(30, spec.n_starts), "rate": 0.05}
         self._since_plan, self._fresh = 0, False  # planner / model learner: transitions since the last plan
+        self._plan_exact = False  # model learner: the plan installed was made from the complete model as it is
         self._start_lo, self._start_hi = np.full(d, np.inf), np.full(d, -np.inf)  # start observations met warming up
         self._swept_policy, self._since_sweep = None, 0  # model learner: the policy swept last, transitions since
         self._plan_for_sweep = False  # the plan in flight is swept when it is swapped in
@@ -237,7 +238,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
             self.planner.reset()
         if self.model is not None:
             self.model.reset()
-            self._fresh, self._since_plan = False, 0
+            self._fresh, self._since_plan, self._plan_exact = False, 0, False
             self._swept_policy, self._since_sweep = None, 0
         assert self.background is not None
         self.background.discard("model")

@@ -97,6 +97,7 @@ class GenericBase(Program):
     _said_no_starts: bool
     _since_plan: int
     _fresh: bool
+    _plan_exact: bool
     _swept_policy: np.ndarray | None
     _since_sweep: int
     _plan_for_sweep: bool

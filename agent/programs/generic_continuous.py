@@ -330,8 +330,18 @@ class GenericContinuous(GenericBase):
         self.planner = self._new_planner(self.planner.dims, seed)
 
     def moves_state(self) -> dict[str, Any]:
-        """What `action_scale=0` and `distance=auto` settled, for a checkpoint."""
-        return {"scale": self._scale, "distance": self._distance, "distance_now": self._distance_now}
+        """What `action_scale=0` and `distance=auto` settled, and the move-size probe in progress,
+        for a checkpoint."""
+        probe = None if self._probe is None else [[m.tolist(), d.tolist()] for m, d in self._probe]
+        prev = None if self._probe_prev is None else [self._probe_prev[0].tolist(), self._probe_prev[1].tolist()]
+        return {
+            "scale": self._scale,
+            "distance": self._distance,
+            "distance_now": self._distance_now,
+            "probe": probe,
+            "probe_prev": prev,
+            "probe_whole": self._probe_whole,
+        }
 
     def restore_moves(self, state: dict[str, Any] | None) -> None:
         """Back to what a checkpoint's `moves_state` settled (before the planner's own state)."""
@@ -340,6 +350,11 @@ class GenericContinuous(GenericBase):
         if self.planner is not None and not isinstance(self.planner, ReachLearner):
             self._set_scale(float(state["scale"]), seed=0)  # the planner's rng comes with its state
         self._distance, self._distance_now = state["distance"], str(state["distance_now"])
+        if "probe" in state:
+            probe, prev = state["probe"], state["probe_prev"]
+            self._probe = None if probe is None else [(np.asarray(m, float), np.asarray(d, float)) for m, d in probe]
+            self._probe_prev = None if prev is None else (np.asarray(prev[0], float), np.asarray(prev[1], float))
+            self._probe_whole = None if state["probe_whole"] is None else float(state["probe_whole"])
 
     def _trace_distance(self, step: int | None = None) -> str:
         """The distance between box traces in force: `distance` when named; `auto`: the net move

@@ -77,7 +77,13 @@ class GenericProgramParams:
         0.0, "Sarsa exploration rate (optimistic initial values explore without it)", min=0.0, max=1.0
     )
     embed_every: int = option(5000, "Sarsa: learning steps between embedding sweeps", min=1)
-    sarsa_warmup: int = option(1000, "Sarsa: random steps first, to measure each value's range for the tiles", min=0)
+    sarsa_warmup: int = option(
+        1000,
+        "Sarsa and the planner: random steps first, to measure each value's range (the tiles, the planner's grid) "
+        "and, with action_scale=0, how faithfully whole and half moves are carried out (over camera frames: "
+        "after the motor map's warm-up, in its coordinates)",
+        min=0,
+    )
     planner_max_dims: int = option(
         4, "learner=auto: continuous observations of at most this many values with box actions of 2+ dims plan", min=1
     )
@@ -192,7 +198,8 @@ class GenericProgramParams:
     )
     watch_after: float = option(
         0.9,
-        "a sweep that reaches the goal from this fraction of starts makes the policy accepted (watched)",
+        "a sweep that reaches the goal from this fraction of starts makes the policy accepted (watched); after a "
+        "drop in a deterministic world, so does the plan of a complete model (the best the changed body allows)",
         min=0.0,
         max=1.0,
     )

@@ -67,6 +67,7 @@ class GenericState(GenericRelearn):
         if self.model is not None:
             out["model"] = self.model.state()
             out.update(fresh=self._fresh, since_plan=self._since_plan, last_choice=self._last_choice)
+            out["plan_exact"] = self._plan_exact
             out.update(swept_policy=self._swept_policy, since_sweep=self._since_sweep)
             out["plan_for_sweep"] = self._plan_for_sweep
         if self.planner is not None:
@@ -154,6 +155,7 @@ class GenericState(GenericRelearn):
         if self.model is not None:
             self.model.restore(state["model"])
             self._fresh, self._since_plan = bool(state["fresh"]), int(state["since_plan"])
+            self._plan_exact = bool(state.get("plan_exact", False))
             self._last_choice = int(state["last_choice"])
             sp_ = state.get("swept_policy")
             self._swept_policy = None if sp_ is None else np.asarray(sp_, dtype=np.int64)

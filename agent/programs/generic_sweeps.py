@@ -226,10 +226,11 @@ class GenericSweeps(GenericRelearn):
         new = sweep_score(sw.reached, sw.traces)
         score = (new.fraction, new.length)
         exact = self._exact_plan()
-        # after a drop, the exact plan of a complete model is the best the changed body allows, even
-        # where it reaches fewer than `watch_after` of the starts (a lesioned motor, a start walled
-        # in): its map is the relearned one, and it is watched for the next change
-        good = new.fraction >= self.params.watch_after or (self.relearn_at is not None and exact and new.fraction > 0)
+        # after a drop, the plan of the complete model (made from it as it is: `_plan_exact`) is the
+        # best the changed body allows, even where it reaches fewer than `watch_after` of the starts
+        # (a lesioned motor, a start walled in): its map is the relearned one, and it is watched
+        best_allowed = self.relearn_at is not None and exact and self._plan_exact and new.fraction > 0
+        good = new.fraction >= self.params.watch_after or best_allowed
         best = self._best
         disparity = end_disparity(self._ends)
         if self._by_ends() and disparity is not None and self._best_disparity is not None:

@@ -101,6 +101,9 @@ class GenericTables(GenericBase):
                 self._embedded(result)
             elif name == "model":
                 self.model.install(result)
+                # nothing new learned since the plan was asked for, and nothing left untried: the
+                # plan is exact for the body as it is (generic_sweeps: the best a changed body allows)
+                self._plan_exact = self.model.complete() and not self._fresh
                 sweep = (self._plan_for_sweep and self._model_sweep_due(obs.step)) or sweep
         s = self._table_id(obs)
         if obs.t > 0 and self._prev is not None:
