@@ -16,8 +16,15 @@ are compared by their net move (`distance=auto`), and how large a move the plann
   the share of each step's displacement that a linear fit of the moves sent leaves unexplained;
   above `UNFAITHFUL` the second half takes half moves, and the plan takes half moves when they
   leave at least `BETTER` less unexplained. A body that follows its moves keeps whole moves (its
-  warm-up is whole moves throughout). Over camera frames the probe runs once the motor map is
-  fitted, in its coordinates (a frame says nothing of a move until it is mapped).
+  warm-up is whole moves throughout).
+* **Over camera frames** the probe runs once the motor map is fitted, in its coordinates (a frame
+  says nothing of a move until it is mapped). Those coordinates carry the map's own error, about
+  the same for every step, which leaves more of a half move's smaller step unexplained than of a
+  whole one's whether the body lags or not. What lag leaves instead is a *spill*: part of each move
+  arrives one step late, so a fit of each step's displacement on the move sent and the move before
+  it finds a coefficient on the move before; the map's error, uncorrelated with the moves, does not
+  bias it. A whole move spills when that coefficient's size is over `SPILLS` of the move's own;
+  the plan takes half moves when theirs spills at most `LESS` as much.
 """
 
 from __future__ import annotations
@@ -30,6 +37,10 @@ ADDS_UP = 0.9
 UNFAITHFUL = 0.25
 #: half moves are taken when they leave at least this much less of a step unexplained
 BETTER = 0.1
+#: over camera frames: a whole move spills into the next step when its coefficient there is over this share
+SPILLS = 0.2
+#: over camera frames: half moves are taken when they spill at most this share of a whole move's spill
+LESS = 0.75
 
 
 def unexplained(moves: np.ndarray, displacements: np.ndarray) -> float | None:
@@ -47,6 +58,29 @@ def unexplained(moves: np.ndarray, displacements: np.ndarray) -> float | None:
     x = np.hstack([m, np.ones((len(m), 1))])
     w = np.linalg.lstsq(x, d, rcond=None)[0]
     return float(np.square(d - x @ w).sum() / total)
+
+
+def spill(moves: np.ndarray, previous: np.ndarray, displacements: np.ndarray) -> float | None:
+    """How much of a move arrives one step late: the least-squares fit of each step's displacement
+    on the move sent and the move before it (with a constant), the size of the coefficient on the
+    move before over that of the move sent (Frobenius norms): 0 for a body that carries each move
+    out by the next step; None with too few rows to tell or no response to the moves sent."""
+    m, p = np.asarray(moves, dtype=np.float64), np.asarray(previous, dtype=np.float64)
+    d = np.asarray(displacements, dtype=np.float64)
+    if m.ndim != 2 or m.shape != p.shape or d.ndim != 2 or len(m) != len(d) or len(m) < 4 * (m.shape[1] + 1):
+        return None
+    x = np.hstack([m, p, np.ones((len(m), 1))])
+    w = np.linalg.lstsq(x, d, rcond=None)[0]
+    own = float(np.linalg.norm(w[: m.shape[1]]))
+    return None if own <= 1e-12 else float(np.linalg.norm(w[m.shape[1] : 2 * m.shape[1]]) / own)
+
+
+def spill_scale(whole: float | None, half: float | None) -> float:
+    """Over camera frames, the fraction of each bound the plan's moves span: 0.5 when a whole move
+    spilled (over `SPILLS`) and a half one spilled at most `LESS` as much, else 1."""
+    if whole is None or half is None or whole <= SPILLS:
+        return 1.0
+    return 0.5 if half <= LESS * whole else 1.0
 
 
 def moves_add_up(nets: np.ndarray, displacements: np.ndarray) -> bool | None:
@@ -69,4 +103,16 @@ def move_scale(whole_share: float | None, half_share: float | None) -> float:
     return 0.5 if half_share <= whole_share - BETTER else 1.0
 
 
-__all__ = ["ADDS_UP", "BETTER", "UNFAITHFUL", "move_scale", "moves_add_up", "probe_half_moves", "unexplained"]
+__all__ = [
+    "ADDS_UP",
+    "BETTER",
+    "LESS",
+    "SPILLS",
+    "UNFAITHFUL",
+    "move_scale",
+    "moves_add_up",
+    "probe_half_moves",
+    "spill",
+    "spill_scale",
+    "unexplained",
+]

@@ -17,7 +17,15 @@ from sensorimotor.agent.learners.reach import ReachLearner, state_sensors
 from sensorimotor.agent.learners.reach import plan_job as reach_plan_job
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EventOutput
-from sensorimotor.agent.programs.box_moves import move_scale, moves_add_up, probe_half_moves, unexplained
+from sensorimotor.agent.programs.box_moves import (
+    SPILLS,
+    move_scale,
+    moves_add_up,
+    probe_half_moves,
+    spill,
+    spill_scale,
+    unexplained,
+)
 from sensorimotor.agent.programs.generic_base import GenericBase
 from sensorimotor.agent.programs.generic_jobs import action_table, motor_job
 from sensorimotor.agent.programs.goal import failed, reached
@@ -28,10 +36,11 @@ from sensorimotor.protocol.messages import EventKind, Observation
 class GenericContinuous(GenericBase):
     """Sarsa(lambda) and the model planner: warm-ups, ranges, learning steps."""
 
-    #: the planner's warm-up, `action_scale=0`: its (move sent, displacement) steps, the step in
-    #: progress, the share a whole move left unexplained, and the half moves it probes (None: no probe)
-    _probe: list[tuple[np.ndarray, np.ndarray]] | None = None
-    _probe_prev: tuple[np.ndarray, np.ndarray] | None = None
+    #: the planner's warm-up, `action_scale=0`: its (move sent, displacement, the move before it in
+    #: the episode) steps, the step in progress, what a whole move measured (share unexplained; over
+    #: camera frames its spill), and the half moves it probes (None: no probe)
+    _probe: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] | None = None
+    _probe_prev: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None = None
     _probe_whole: float | None = None
     _half_actions: np.ndarray | None = None
     #: `distance=auto` resolved (None: not yet; a box planner's sweeps decide, see `_trace_distance`)
@@ -118,13 +127,14 @@ class GenericContinuous(GenericBase):
         self._seen_lo, self._seen_hi = np.minimum(self._seen_lo, x), np.maximum(self._seen_hi, x)
         if obs.t == 0:
             self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
-        if self._probe is not None and self._probe_prev is not None and obs.t > 0:
-            self._probe.append((self._probe_prev[1], x - self._probe_prev[0]))
+        prev = self._probe_prev if obs.t > 0 else None
+        if self._probe is not None and prev is not None:
+            self._probe.append((prev[1], x - prev[0], prev[2]))
         self._warm += 1
         if self._probe is not None and self._warm == self.params.sarsa_warmup // 2:
-            self._probe_whole = unexplained(*self._probe_arrays())
+            self._probe_whole = self._probe_measure()
             self._probe = []
-            if not probe_half_moves(self._probe_whole):  # whole moves followed: no half moves to try
+            if not self._probe_lags(self._probe_whole):  # whole moves followed: no half moves to try
                 self._choose_scale(obs.step)
         if self._warm >= self.params.sarsa_warmup:
             self._set_ranges()
@@ -136,28 +146,46 @@ class GenericContinuous(GenericBase):
         probing_half = self._probe is not None and self._probe_whole is not None and self._half_actions is not None
         table = self._half_actions if probing_half and self._half_actions is not None else self.actions
         move = table[int(self.rng.integers(self.n_actions))]
-        self._probe_prev = (x, move) if self._probe is not None else None
+        self._probe_prev = (x, move, None if prev is None else prev[1]) if self._probe is not None else None
         return Decision(tuple(float(v) for v in move))
 
-    def _probe_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+    def _probe_measure(self) -> float | None:
+        """What the probe's steps so far say of the moves sent: the share a linear fit leaves
+        unexplained, or over camera frames (the motor map's coordinates) how much of a move spills
+        into the next step (`box_moves`: the map's own error would read as unfaithful small moves)."""
         probe = self._probe or []
         d = self.actions.shape[1]
-        return np.array([p[0] for p in probe]).reshape(-1, d), np.array([p[1] for p in probe]).reshape(len(probe), -1)
+        if self.motor:
+            rows = [p for p in probe if p[2] is not None]
+            moves, before = (np.array([p[i] for p in rows]).reshape(-1, d) for i in (0, 2))
+            return spill(moves, before, np.array([p[1] for p in rows]).reshape(len(rows), -1))
+        return unexplained(
+            np.array([p[0] for p in probe]).reshape(-1, d), np.array([p[1] for p in probe]).reshape(len(probe), -1)
+        )
+
+    def _probe_lags(self, whole: float | None) -> bool:
+        """Whether a whole move was carried out unfaithfully, so half moves are tried."""
+        return whole is not None and whole > SPILLS if self.motor else probe_half_moves(whole)
 
     def _choose_scale(self, step: int) -> None:
         """The warm-up's end (`action_scale=0`): the plan takes half moves when the body carried
-        them out more faithfully than whole ones (`box_moves.move_scale`); said in an event."""
-        half = unexplained(*self._probe_arrays()) if probe_half_moves(self._probe_whole) else None
-        scale = move_scale(self._probe_whole, half)
+        them out more faithfully than whole ones (`box_moves.move_scale`, over camera frames
+        `box_moves.spill_scale`); said in an event."""
+        half = self._probe_measure() if self._probe_lags(self._probe_whole) else None
+        scale = spill_scale(self._probe_whole, half) if self.motor else move_scale(self._probe_whole, half)
         self._probe, self._probe_prev = None, None
         self._set_scale(scale)
-        whole = "?" if self._probe_whole is None else f"{self._probe_whole:.0%}"
+        w = self._probe_whole
+        if self.motor:
+            what = f"in the motor coordinates a whole move spilled {'?' if w is None else f'{w:.2g}'} of itself into"
+            what += " the next step" + ("" if half is None else f", a half move {half:.2g}")
+        else:
+            what = f"a linear fit of the moves sent left {'?' if w is None else f'{w:.0%}'} of a whole move's step"
+            what += " unexplained" + ("" if half is None else f" and {half:.0%} of a half move's")
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
-                f"a linear fit of the moves sent left {whole} of a whole move's step unexplained"
-                + ("" if half is None else f" and {half:.0%} of a half move's")
-                + f": the plan takes {'half' if scale != 1.0 else 'whole'} moves",
+                what + f": the plan takes {'half' if scale != 1.0 else 'whole'} moves",
                 step,
                 reason="move_scale",
             )
@@ -332,8 +360,12 @@ class GenericContinuous(GenericBase):
     def moves_state(self) -> dict[str, Any]:
         """What `action_scale=0` and `distance=auto` settled, and the move-size probe in progress,
         for a checkpoint."""
-        probe = None if self._probe is None else [[m.tolist(), d.tolist()] for m, d in self._probe]
-        prev = None if self._probe_prev is None else [self._probe_prev[0].tolist(), self._probe_prev[1].tolist()]
+
+        def listed(row: tuple[np.ndarray, np.ndarray, np.ndarray | None]) -> list[Any]:
+            return [row[0].tolist(), row[1].tolist(), None if row[2] is None else row[2].tolist()]
+
+        probe = None if self._probe is None else [listed(r) for r in self._probe]
+        prev = None if self._probe_prev is None else listed(self._probe_prev)
         return {
             "scale": self._scale,
             "distance": self._distance,
@@ -352,8 +384,16 @@ class GenericContinuous(GenericBase):
         self._distance, self._distance_now = state["distance"], str(state["distance_now"])
         if "probe" in state:
             probe, prev = state["probe"], state["probe_prev"]
-            self._probe = None if probe is None else [(np.asarray(m, float), np.asarray(d, float)) for m, d in probe]
-            self._probe_prev = None if prev is None else (np.asarray(prev[0], float), np.asarray(prev[1], float))
+
+            def row(r: list[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                return (
+                    np.asarray(r[0], float),
+                    np.asarray(r[1], float),
+                    None if r[2] is None else np.asarray(r[2], float),
+                )
+
+            self._probe = None if probe is None else [row(r) for r in probe]
+            self._probe_prev = None if prev is None else row(prev)
             self._probe_whole = None if state["probe_whole"] is None else float(state["probe_whole"])
 
     def _trace_distance(self, step: int | None = None) -> str:
