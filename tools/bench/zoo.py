@@ -109,6 +109,15 @@ ZOO: tuple[ZooWorld, ...] = (
     ZooWorld(
         "PandaReach (pixels)", "gym:panda_gym:PandaReach-v3", {"observe": "pixels"}, {}, 60_000, 10_000, "panda_gym"
     ),
+    ZooWorld(
+        "PandaReach (pixels), half moves, whole-move warm-up",
+        "gym:panda_gym:PandaReach-v3",
+        {"observe": "pixels"},
+        {"distance": "net", "action_scale": "0.5", "motor_scale": "1"},
+        60_000,
+        10_000,
+        "panda_gym",
+    ),
     *_lakes(),
     *_arms(),
 )

@@ -406,10 +406,16 @@ SOURCES["zoo-continuous"] = Source(
                 'sme bench zoo --seeds 3 --world "PandaReach (state), net move"',
             ),
             (
-                "PandaReach-v3, 64 x 64 grey frames (`observe=pixels`), net moves, half moves, whole-move warm-up (`motor_scale=1`)",
+                "PandaReach-v3, 64 x 64 grey frames (`observe=pixels`), at the defaults (the program picks net moves, half moves)",
+                "PandaReach (pixels)",
+                "results/bench-zoo-panda/pixels-defaults.jsonl",
+                'sme bench zoo --defaults --seeds 3 --world "PandaReach (pixels)"',
+            ),
+            (
+                "PandaReach-v3, 64 x 64 grey frames, net moves, half moves, whole-move warm-up (`distance=net`, `action_scale=0.5`, `motor_scale=1`)",
                 "PandaReach (pixels), half moves, whole-move warm-up",
                 "results/bench-zoo-panda/pixels-ranked-by-ends.jsonl",
-                "sme bench zoo --seeds 3 --world pixels --workers 2",
+                'sme bench zoo --seeds 3 --world "PandaReach (pixels), half moves, whole-move warm-up"',
             ),
         )
     ),
