@@ -447,7 +447,7 @@ for _family, _world, _seeds in (
     ("gridworld", "Gridworld", 3),
     ("arm", "2 joints", 3),
     ("rovingeye", "Roving eye", 3),
-    ("retina", "Retina", 1),
+    ("retina", "Retina", 3),
 ):
     SOURCES[f"bench-changes-{_family}"] = Source(
         f'sme bench changes --seeds {_seeds} --world "{_world}" --json',
