@@ -10,7 +10,7 @@ from sensorimotor.protocol.messages import Control
 from sensorimotor.tools.bench import changes as C
 from sensorimotor.tools.bench.changes_families import FAMILIES, family
 
-pytest.importorskip("river")
+pytest.importorskip("river", reason="ADWIN and Page-Hinkley come from river: pip install -e '.[experiments]'")
 
 
 @pytest.mark.parametrize("fam", FAMILIES, ids=lambda f: f.world)
