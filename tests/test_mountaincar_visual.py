@@ -193,7 +193,7 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
 
     curve = [m for _, m in prog.curve]
     before = [m for s, m in prog.curve if s < at["morph"]]
-    assert len(before) == 2 and max(before) < 0.3 * random_agent(0, 10), curve  # it learned to drive
+    assert len(before) == 2 and before[-1] < 0.3 * random_agent(0, 10), curve  # it learned to drive by 20k steps
     assert [e.values["steps_to_goal"] for e in run.events("evaluation")] == pytest.approx(curve)
     assert drops and drops[0] > at["morph"], (drops, at)  # no false alarm while it learned
     assert drops[0] - at["morph"] <= 5000, (drops, at)  # 4267 with this seed: about a dozen failing episodes
@@ -238,3 +238,45 @@ def test_velocity_window_drives_on_the_slope_of_the_last_positions_and_restores(
     assert list(prog._car_state(5.0, True)) == [5.0, 0.0]
     with pytest.raises(ValueError, match="velocity"):
         MountainCarProgram(world.spec(), seed=0, velocity="spline")
+
+
+@pytest.mark.parametrize("offset", [-0.4, -0.1, 0.0, 0.25, 0.45])
+def test_a_reading_places_the_least_difference_between_vergence_steps(offset):
+    """At the fixated vergence the eyes look one step either side; the foveal differences there (a V
+    around the true fixation) place it below one step: the equiangular fit recovers the offset, and
+    the eyes first converge, then diverge twice, to see both sides."""
+    w = MountainCarWorld(n_eval=2, seed=0)
+    prog = MountainCarProgram(w.spec(), seed=0)
+    g = 12
+    prog._goal, prog._k = g, g
+    prog._ds = {g: 3.0 * abs(offset)}
+    assert prog._look_aside() == 0  # converge to g + 1 first
+    prog._ds[g + 1], prog._k = 3.0 * abs(1 - offset), g + 1
+    assert prog._look_aside() == 1 and prog._k == g + 1  # then diverge toward g - 1
+    prog._ds[g - 1], prog._k = 3.0 * abs(-1 - offset), g - 1
+    assert prog._look_aside() is None
+    assert prog._substep() == pytest.approx(offset)
+
+
+def test_sub_step_positions_follow_the_true_angle_three_times_closer_than_whole_steps():
+    """The world's foveal differences around the perceptual goal, read as the program reads them,
+    put the fixation within about a tenth of a vergence step of the true angle along the track
+    (whole steps: the quantisation's 0.29)."""
+    w = MountainCarWorld(n_eval=2, seed=0)
+    prog = MountainCarProgram(w.spec(), seed=0)
+    whole, sub, truth = [], [], []
+    with w:
+        for x in np.linspace(-2.0, 1.85, 60):
+            w.x = float(x)
+            w.z = float(w.z_of(x))
+            g = w.perceptual_goal()
+            prog._goal, prog._ds = g, dict(zip(range(g - 1, g + 2), w.differences(range(g - 1, g + 2)), strict=True))
+            whole.append(g)
+            sub.append(g + prog._substep())
+            truth.append(float(w.true_angle(w.z)) / w.step_rad)
+
+    def rms(est):
+        res = np.asarray(est) - np.asarray(truth)
+        return float(np.sqrt(np.mean((res - res.mean()) ** 2)))
+
+    assert rms(sub) < 0.13 and rms(whole) > 0.25 and rms(sub) < rms(whole) / 2.5, (rms(sub), rms(whole))

@@ -71,7 +71,9 @@ class MountainCarProgramParams:
     n_eval: int | None = option(None, "evaluation states used (none: all the world offers)", min=0)
     watch_after: int = option(50_000, "training car steps before episodes report performance", min=0)
     report_after: int = option(400, "car steps after which a trained driver gives up an episode", min=1)
-    process_var: float = option(1e-5, "process variance of the velocity Kalman filter", min=0.0)
+    process_var: float = option(
+        2e-4, "process variance of the velocity Kalman filter, in squared vergence steps per car step", min=0.0
+    )
     velocity: str = option(
         "kalman",
         "velocity estimate: kalman (a constant-velocity Kalman filter on the position) or window "
@@ -81,6 +83,11 @@ class MountainCarProgramParams:
     velocity_window: int = option(8, "car steps the window velocity estimate spans", min=1)
     policy_map: int = option(
         0, "clusters of a policy map of the drive traces emitted after each evaluation (0: none; ch. 9.6)", min=0
+    )
+    substep: bool = option(
+        True,
+        "read the position below one vergence step: at the goal the eyes look one step either side, "
+        "and the foveal differences there place the minimum between steps (equiangular fit)",
     )
     recall_check: int = option(
         64,
@@ -163,6 +170,14 @@ class MountainCarProgram(Program):
         self._view: bytes | None = None  # the parallel-eye view of the reading in progress
         self._checking: float | None = None  # the recalled position that reading is checking
         self.quantum = 1.0
+        self._slope = 0.0  # embedding coordinate per vergence step (signed), to place a sub-step offset
+        try:
+            self._k_max: int | None = int(spec.params["max_vergence"]) if "max_vergence" in spec.params else None
+        except ValueError as e:
+            raise SpecMismatch(f"mountaincar spec param max_vergence must be an integer: {e}") from None
+        self._k = 0  # the eyes' vergence, in steps from parallel, during a reading
+        self._ds: dict[int, float] = {}  # foveal difference per vergence met in the reading in progress
+        self._goal: int | None = None  # the vergence the reading fixated at, while looking either side
         # driving
         self.training_steps = 0
         self.episodes = 0
@@ -227,6 +242,9 @@ class MountainCarProgram(Program):
             self.quantum = span / max(max(lengths) - min(lengths), 1)  # one vergence step, in coordinates
             self._make_driver(float(coords.min()), float(coords.max()))
         self.landmarks, self._model, self._positions, self._verge = traces, mds.model, {}, {}
+        ks = np.array([self._vergence_after(t) for t in traces], dtype=np.float64)
+        # the embedding is ~linear in the fixating vergence (Eq 7.3 over converge-only traces)
+        self._slope = float(np.polyfit(ks, coords[:, 0], 1)[0]) if np.ptp(ks) > 0 else 0.0
         self._forget()
         n = len(traces)
         self.emit(
@@ -258,6 +276,43 @@ class MountainCarProgram(Program):
             p = self._positions[key] = float(y[0, 0])
         return p
 
+    def _vergence_after(self, trace: list[int]) -> int:
+        """The eyes' vergence, in steps from parallel, after the actions of `trace`."""
+        k = 0
+        for a in trace:
+            k = k + 1 if a == CONVERGE else max(k - 1, 0)
+            if self._k_max is not None:
+                k = min(k, self._k_max)
+        return k
+
+    def _substep(self) -> float:
+        """Where between vergence steps the foveal difference is least, from the differences at the
+        fixated vergence and one step either side (equiangular fit of a V; in [-0.5, 0.5] steps,
+        positive toward converging). 0 when a side is out of the eyes' range."""
+        g = self._goal
+        assert g is not None, "a sub-step offset is read once the reading fixated"
+        dm, d0, dp = self._ds.get(g - 1), self._ds.get(g), self._ds.get(g + 1)
+        if dm is None or d0 is None or dp is None:
+            return 0.0
+        den = max(dm, dp) - d0
+        return float(np.clip(0.5 * (dm - dp) / den, -0.5, 0.5)) if den > 0 else 0.0
+
+    def _look_aside(self) -> int | None:
+        """The vergence action toward the next side of the goal not yet seen, or None when both are
+        seen (or out of the eyes' range)."""
+        g = self._goal
+        assert g is not None, "the eyes look aside once the reading fixated"
+        for k in (g + 1, g - 1):
+            if k >= 0 and (self._k_max is None or k <= self._k_max) and k not in self._ds:
+                return CONVERGE if k > self._k else DIVERGE
+        return None
+
+    def _move_eyes(self, a: int) -> Decision:
+        self._k = self._k + 1 if a == CONVERGE else max(self._k - 1, 0)
+        if self._k_max is not None:
+            self._k = min(self._k, self._k_max)
+        return Decision((float(a),))
+
     # stage 2: driving ----------------------------------------------------------------------------
     def _make_driver(self, lo: float, hi: float) -> None:
         prm = self.params
@@ -275,10 +330,12 @@ class MountainCarProgram(Program):
 
     def _filter(self) -> VelocityFilter | WindowVelocity:
         """The velocity estimate (`velocity`). The Kalman filter's measurement noise: a position is
-        quantised to one vergence step (uniform, variance q^2/12)."""
+        quantised to one vergence step (uniform, variance q^2/12), or read below one step (`substep`:
+        a tenth of a step's standard deviation, as measured along the track)."""
         if self.params.velocity == "window":
             return WindowVelocity(self.params.velocity_window)
-        return VelocityFilter(measurement_var=self.quantum**2 / 12, process_var=self.process_var * self.quantum**2)
+        r = self.quantum**2 / (100 if self.params.substep else 12)
+        return VelocityFilter(measurement_var=r, process_var=self.process_var * self.quantum**2)
 
     @property
     def evaluating(self) -> bool:
@@ -331,22 +388,40 @@ class MountainCarProgram(Program):
             self._trace = []
         if self._trace is None:
             self._trace = []
-        if not (obs.reward > 0 and self._trace) and len(self._trace) < self.max_trace and not (obs.t > 0 and obs.done):
+        if not self._trace:
+            self._k, self._ds, self._goal = 0, {}, None
+        if self._goal is not None:  # looking either side of the fixated vergence
+            self._ds[self._k] = foveal_difference(obs)
+            aside = self._look_aside()
+            if aside is not None:
+                return self._move_eyes(aside)
+        elif (
+            not (obs.reward > 0 and self._trace) and len(self._trace) < self.max_trace and not (obs.t > 0 and obs.done)
+        ):
             if not self._trace:
                 p = self._recalled(obs)
                 if p is not None:
                     self._trace = None
                     return self._car_step(p)
-            d = foveal_difference(obs)
+            d = self._ds[self._k] = foveal_difference(obs)
             a = self._verge.get(d)
             if a is None:
                 a = self._verge[d] = self.lspi.greedy(d)
             self._trace.append(a)
-            return Decision((float(a),))
-        if obs.done:  # the world ended the episode while we were reading (its car-step limit)
+            return self._move_eyes(a)
+        elif obs.done:  # the world ended the episode while we were reading (its car-step limit)
             self._view = self._checking = None
             return self._episode_over(obs)
+        elif self.params.substep and obs.reward > 0:
+            self._goal = self._k
+            self._ds[self._k] = foveal_difference(obs)
+            aside = self._look_aside()
+            if aside is not None:
+                return self._move_eyes(aside)
         p = self.position(self._trace)
+        if self._goal is not None:
+            p += self._substep() * self._slope
+            self._goal = None
         self._remember(p)
         self._trace = None
         return self._car_step(p)
@@ -511,6 +586,10 @@ class MountainCarProgram(Program):
             "positions": [[list(k), v] for k, v in self._positions.items()],
             "verge": [[d, a] for d, a in self._verge.items()],
             "quantum": self.quantum,
+            "slope": self._slope,
+            "k": self._k,
+            "ds": [[k, d] for k, d in self._ds.items()],
+            "goal": self._goal,
             "training_steps": self.training_steps,
             "episodes": self.episodes,
             "driver": driver,
@@ -561,6 +640,10 @@ class MountainCarProgram(Program):
         self._verge = {float(d): int(a) for d, a in state["verge"]}
         self._forget()
         self.quantum = float(state["quantum"])
+        self._slope = float(state.get("slope", 0.0))
+        self._k = int(state.get("k", 0))
+        self._ds = {int(k): float(d) for k, d in state.get("ds", [])}
+        self._goal = None if state.get("goal") is None else int(state["goal"])
         self.training_steps, self.episodes = int(state["training_steps"]), int(state["episodes"])
         driver = state["driver"]
         if driver is None:
@@ -608,4 +691,5 @@ class MountainCarProgram(Program):
         self.practice.reset()
         self._sweep.interrupted()
         self._view = self._checking = None
+        self._goal = None
         self._start_training_episode()
