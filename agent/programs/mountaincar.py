@@ -74,6 +74,12 @@ class MountainCarProgramParams:
     process_var: float = option(
         2e-4, "process variance of the velocity Kalman filter, in squared vergence steps per car step", min=0.0
     )
+    velocity_range: float = option(
+        0.04,
+        "velocity the driver's tiles span either side of rest, in embedding spans per car step (0.04: the "
+        "car crosses its track in no fewer than ~25 steps)",
+        min=1e-6,
+    )
     velocity: str = option(
         "kalman",
         "velocity estimate: kalman (a constant-velocity Kalman filter on the position) or window "
@@ -317,7 +323,7 @@ class MountainCarProgram(Program):
     def _make_driver(self, lo: float, hi: float) -> None:
         prm = self.params
         margin = 0.1 * (hi - lo)
-        vmax = 0.04 * (hi - lo)  # the car crosses its track in no fewer than ~25 steps
+        vmax = self.params.velocity_range * (hi - lo)
         coder = TileCoder([lo - margin, -vmax], [hi + margin, vmax], tiles=prm.tiles, n_tilings=prm.n_tilings)
         self.sarsa = self._sarsa(coder, int(self.rng.integers(2**31)))
         self._kf = self._filter()
