@@ -73,7 +73,10 @@ class MountainCarProgramParams:
     watch_after: int = option(50_000, "training car steps before episodes report performance", min=0)
     report_after: int = option(400, "car steps after which a trained driver gives up an episode", min=1)
     process_var: float = option(
-        2e-4, "process variance of the velocity Kalman filter, in squared vergence steps per car step", min=0.0
+        2e-4,
+        "process variance of the velocity Kalman filter, in squared vergence steps per car step (1e-5 "
+        "with substep=false reproduces the whole-step reading as it was)",
+        min=0.0,
     )
     velocity_range: float = option(
         0.04,
@@ -397,6 +400,9 @@ class MountainCarProgram(Program):
             self._trace = []
         if not self._trace:
             self._k, self._ds, self._goal = 0, {}, None
+        if self._goal is not None and obs.done:  # not from this world (a vergence step never ends it)
+            self._goal = self._view = self._checking = None
+            return self._episode_over(obs)
         if self._goal is not None:  # looking either side of the fixated vergence
             self._ds[self._k] = foveal_difference(obs)
             aside = self._look_aside()
@@ -647,8 +653,14 @@ class MountainCarProgram(Program):
         self._verge = {float(d): int(a) for d, a in state["verge"]}
         self._forget()
         self.quantum = float(state["quantum"])
-        self._slope = float(state.get("slope", 0.0))
-        self._k = int(state.get("k", 0))
+        if "slope" in state:
+            self._slope = float(state["slope"])
+        else:  # a checkpoint from before the sub-step reading: the slope from its landmarks
+            self._slope = 0.0
+            if self._model is not None and self.landmarks:
+                ks = np.array([self._vergence_after(t) for t in self.landmarks], dtype=np.float64)
+                ys = np.array([self.position(t) for t in self.landmarks])
+                self._slope = float(np.polyfit(ks, ys, 1)[0]) if np.ptp(ks) > 0 else 0.0
         self._ds = {int(k): float(d) for k, d in state.get("ds", [])}
         self._goal = None if state.get("goal") is None else int(state["goal"])
         self.training_steps, self.episodes = int(state["training_steps"]), int(state["episodes"])
@@ -668,6 +680,7 @@ class MountainCarProgram(Program):
             self._kf.restore(driver["filter"])
         trace = state["trace"]
         self._trace = None if trace is None else [int(a) for a in trace]
+        self._k = int(state["k"]) if "k" in state else self._vergence_after(self._trace or [])
         self._last_drive, self._s = bool(state["last_drive"]), array_or_none(state["s"])
         self._a, self._ep_steps, self._watching = int(state["a"]), int(state["ep_steps"]), bool(state["watching"])
         self._perf = None if state["perf"] is None else float(state["perf"])
