@@ -448,6 +448,7 @@ for _family, _world, _seeds in (
     ("arm", "2 joints", 3),
     ("rovingeye", "Roving eye", 3),
     ("retina", "Retina", 3),
+    ("mountaincar", "Mountain car", 3),
 ):
     SOURCES[f"bench-changes-{_family}"] = Source(
         f'sme bench changes --seeds {_seeds} --world "{_world}" --json',
