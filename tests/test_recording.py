@@ -229,7 +229,8 @@ def test_offline_replay_plots_each_worlds_latest_embedding(session, tmp_path):
 
 def test_replay_all_without_an_agent_is_the_router_itself(procs, session):
     """`sme replay FILE --what all` with no agent running: nothing to wait for; `sme watch` on the
-    same endpoint sees the recorded embeddings."""
+    same endpoint sees the recorded stream (its first row may be an embedding, an agent event or the
+    world event of the recorded perturbation, whichever the loop reaches first)."""
     path, _ = session
     ep = f"tcp/127.0.0.1:{free_port()}"
     rp = procs.start("replay", path, "--what", "all", "--speed", "10", "--loop", "--connect", ep)
@@ -238,4 +239,4 @@ def test_replay_all_without_an_agent_is_the_router_itself(procs, session):
     watch = procs.start("watch", "--json", "--count", "1", "--timeout", "60", "--connect", ep)
     assert watch.wait(90) == 0
     row = json.loads(watch.stdout.readline())
-    assert row["type"] in ("embedding", "event") and row["world"] == "r1", row
+    assert row["type"] in ("embedding", "event", "world_event") and row["world"] == "r1", row
