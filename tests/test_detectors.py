@@ -122,3 +122,38 @@ def test_world_stream_of_the_gridworld_has_no_change_and_bench_cli_writes_the_ta
     assert "| gridworld | none (accepts none) | cusum | n/a | n/a |" in text
     assert main(["bench", "detectors", "--worlds", "nowhere"]) == 2
     assert "unknown world(s) nowhere" in capsys.readouterr().err
+
+
+def _episode_lengths(seed, n=5000, after=200):
+    """A driver's training episodes as the mountain car reports them, -(car steps) / 400: most near
+    100 steps, a 6 % tail of slow ones (200-400); after `n` a body change makes 60 % give up."""
+    rng = np.random.default_rng(seed)
+    steps = np.where(rng.random(n) < 0.06, rng.uniform(200, 400, n), rng.normal(100, 30, n))
+    post = np.where(rng.random(after) < 0.6, 400.0, rng.normal(100, 30, after))
+    return -np.clip(np.concatenate([steps, post]), 1, 400) / 400, n
+
+
+def test_a_capped_cusum_ignores_a_skewed_streams_tail_and_still_sees_a_run_of_failures():
+    from sensorimotor.agent.programs.mountaincar import MountainCarProgram
+
+    capped = MountainCarProgram.detector_params
+    assert capped["clip"] > capped["k"]
+    fa = {"plain": 0, "capped": 0}
+    for seed in range(10):
+        x, n = _episode_lengths(seed)
+        for name, params in (("plain", {"warmup": 20, "rate": 0.05}), ("capped", capped)):
+            d = CUSUM(**params)
+            alarms = [i for i, v in enumerate(x) if d.update(v)]
+            fa[name] += sum(i < n for i in alarms)
+            if name == "capped":
+                after = [i - n for i in alarms if i >= n]
+                assert after and after[0] <= 15, (seed, after)
+    assert fa["capped"] <= 10 and fa["capped"] * 10 < fa["plain"], fa
+
+
+def test_a_cap_at_or_below_the_allowance_is_refused():
+    with pytest.raises(ValueError, match="clip"):
+        CUSUM(k=0.75, clip=0.5)
+    # uncapped and a cap no sample reaches give the same alarms
+    x = stream(5)
+    assert first_alarm(CUSUM(), x) == first_alarm(CUSUM(clip=1e9), x)
