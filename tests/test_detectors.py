@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from sensorimotor.agent.detectors import CUSUM, DETECTORS, MovingAverageDrop, PageHinkley, make_detector
+from sensorimotor.agent.detectors import CUSUM, DETECTORS, BernoulliCUSUM, MovingAverageDrop, PageHinkley, make_detector
 
 
 def stream(seed, pre=3000, post=500, drop=2.0, sd=1.0, level=0.0):
@@ -133,27 +133,39 @@ def _episode_lengths(seed, n=5000, after=200):
     return -np.clip(np.concatenate([steps, post]), 1, 400) / 400, n
 
 
-def test_a_capped_cusum_ignores_a_skewed_streams_tail_and_still_sees_a_run_of_failures():
+def test_the_cusum_of_failures_ignores_a_skewed_streams_tail_and_still_sees_a_run_of_failures():
     from sensorimotor.agent.programs.mountaincar import MountainCarProgram
 
-    capped = MountainCarProgram.detector_params
-    assert capped["clip"] > capped["k"]
-    fa = {"plain": 0, "capped": 0}
+    params = MountainCarProgram.detector_params
+    assert isinstance(make_detector("cusum", **params), BernoulliCUSUM)
+    fa = {"z-score": 0, "failures": 0}
     for seed in range(10):
         x, n = _episode_lengths(seed)
-        for name, params in (("plain", {"warmup": 20, "rate": 0.05}), ("capped", capped)):
-            d = CUSUM(**params)
+        for name, make in (
+            ("z-score", lambda: CUSUM(warmup=20, rate=0.05)),
+            ("failures", lambda: make_detector("cusum", **params)),
+        ):
+            d = make()
             alarms = [i for i, v in enumerate(x) if d.update(v)]
             fa[name] += sum(i < n for i in alarms)
-            if name == "capped":
+            if name == "failures":
                 after = [i - n for i in alarms if i >= n]
                 assert after and after[0] <= 15, (seed, after)
-    assert fa["capped"] <= 10 and fa["capped"] * 10 < fa["plain"], fa
+    assert fa["failures"] <= 2 and fa["failures"] * 10 < fa["z-score"], fa
 
 
-def test_a_cap_at_or_below_the_allowance_is_refused():
-    with pytest.raises(ValueError, match="clip"):
-        CUSUM(k=0.75, clip=0.5)
-    # uncapped and a cap no sample reaches give the same alarms
-    x = stream(5)
-    assert first_alarm(CUSUM(), x) == first_alarm(CUSUM(clip=1e9), x)
+def test_bernoulli_cusum_is_the_log_likelihood_ratio_of_failures_and_saves_its_state():
+    d = BernoulliCUSUM(failure=0.0, shift=0.3, h=8.0, warmup=4, rate=0.02)
+    for v in [1.0] * 6:  # 4 join the reference (lag 2), 2 wait: p0 = 0, floored at 0.02
+        assert not d.update(v)
+    assert d.reference == 0.0 and d.statistic == 0.0
+    d.update(0.0)
+    assert d.statistic == pytest.approx(np.log(0.32 / 0.02))
+    saved = d.state()
+    e = BernoulliCUSUM(failure=0.0, shift=0.3, h=8.0, warmup=4, rate=0.02)
+    e.restore(saved)
+    assert e.update(0.0) is d.update(0.0) is False and e.statistic == pytest.approx(2 * np.log(16))
+    assert e.update(0.0) is d.update(0.0) is True  # 3 * log(16) = 8.3 > 8
+    assert e.statistic == d.statistic == 0.0
+    with pytest.raises(ValueError):
+        BernoulliCUSUM(shift=1.5)

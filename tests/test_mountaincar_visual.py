@@ -159,13 +159,11 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
     """Shortened ch. 8: position from vergence, driving learned on top (evaluated every 10k car
     steps on 10 fixed states), then the baseline goes 1.0 -> 1.4 m while it drives, between two
     evaluations (an evaluation of the changed body before the agent relearns costs 10 episodes that
-    mostly time out). Seed 0's driver fails few episodes by then; a driver that still fails one in
-    ten (seed 1: 193 steps to the goal at 20k) is noticed much later (14,081 steps), by design of the
-    program's capped detector (docs/body-changes.md)."""
+    mostly time out)."""
     from sensorimotor.agent.detectors import make_detector
 
-    w = MountainCarWorld(n_eval=10, seed=0)
-    prog = MountainCarProgram(w.spec(), seed=0, eval_every=10_000, watch_after=12_000)
+    w = MountainCarWorld(n_eval=10, seed=1)
+    prog = MountainCarProgram(w.spec(), seed=1, eval_every=10_000, watch_after=12_000)
     at = {"morph": None}
     drops: list[int] = []
 
@@ -198,7 +196,7 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
     assert len(before) == 2 and before[-1] < 0.3 * random_agent(0, 10), curve  # it learned to drive by 20k steps
     assert [e.values["steps_to_goal"] for e in run.events("evaluation")] == pytest.approx(curve)
     assert drops and drops[0] > at["morph"], (drops, at)  # no false alarm while it learned
-    assert drops[0] - at["morph"] <= 5000, (drops, at)  # 2128 with this seed: about a dozen failing episodes
+    assert drops[0] - at["morph"] <= 5000, (drops, at)  # 4267 with this seed: about a dozen failing episodes
     relearned = run.embeddings[-1]
     assert relearned.trigger == Trigger.RELEARNED and relearned.procrustes_error < 0.01  # the new body's angles
 

@@ -3,6 +3,7 @@
 import inspect
 
 from sensorimotor.agent.detectors.base import DropDetector, RunningMoments
+from sensorimotor.agent.detectors.bernoulli_cusum import BernoulliCUSUM
 from sensorimotor.agent.detectors.cusum import CUSUM
 from sensorimotor.agent.detectors.moving_average_drop import MovingAverageDrop
 from sensorimotor.agent.detectors.page_hinkley import PageHinkley
@@ -26,7 +27,9 @@ def make_detector(name: str = DEFAULT_DETECTOR, **params) -> DropDetector:
     name : str, default DEFAULT_DETECTOR
         A key of `DETECTORS` ("cusum", "moving_average", "page_hinkley").
     **params
-        Constructor settings; those the detector does not accept are dropped.
+        Constructor settings; those the detector does not accept are dropped. With "cusum", a
+        `failure` value (a stream of episodes that succeed or fail, such as the mountain car's
+        -1 for a given-up episode) gives the CUSUM of its failures, `BernoulliCUSUM`.
 
     Returns
     -------
@@ -48,11 +51,14 @@ def make_detector(name: str = DEFAULT_DETECTOR, **params) -> DropDetector:
         cls = DETECTORS[name]
     except KeyError:
         raise ValueError(f"unknown detector {name!r}; known: {', '.join(sorted(DETECTORS))}") from None
+    if cls is CUSUM and params.get("failure") is not None:
+        cls = BernoulliCUSUM  # a stream with a failure value: the CUSUM of its failures
     accepted = inspect.signature(cls).parameters
     return cls(**{k: v for k, v in params.items() if k in accepted})
 
 
 __all__ = [
+    "BernoulliCUSUM",
     "CUSUM",
     "DETECTORS",
     "DEFAULT_DETECTOR",
