@@ -122,9 +122,11 @@ class Restoring(Publishing):
                     saved.program_params,
                     wanted,
                 )
-            detector = None
-            if saved.detector_state is not None and saved.detector_state.get("name") == self.detector:
-                detector = make_detector(self.detector, **program.detector_params)
+            # the detector the program asks for under the configured name (a program may ask the
+            # "cusum" family for its failures: BernoulliCUSUM); a saved state of another kind is left
+            fresh = make_detector(self.detector, **program.detector_params)
+            same_kind = saved.detector_state is not None and saved.detector_state.get("name") == fresh.name
+            detector = fresh if same_kind else None
             # arrays of the shapes this world's program keeps, before anything is restored from them
             check_shapes(saved.program_state, program.state(), "program_state")
             if detector is not None and saved.detector_state is not None:

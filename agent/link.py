@@ -364,7 +364,7 @@ class WorldLink:
                 c.drops += 1
                 self.event(
                     EventKind.DROP_DETECTED,
-                    f"{detector.name} saw the reward drop (now {perf:.4g}, reference {ref:.4g})",
+                    f"{detector.name} saw the reward drop (now {perf:.4g}, {detector.reference_label} {ref:.4g})",
                     obs.step,
                     {"reward": perf, "reference": ref},
                     reason=detector.name,

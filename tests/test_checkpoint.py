@@ -421,3 +421,30 @@ def test_a_restored_world_reports_the_steps_it_has_learned(tmp_path):
     daemon.links[world.world_id] = att.link
     daemon.checkpoint()
     assert read_checkpoint(str(tmp_path / f"{world.world_id}.ckpt.npz")).steps == 150
+
+
+def test_a_program_asking_for_the_cusum_of_failures_gets_its_state_back_and_never_a_z_score_cusums(tmp_path):
+    """The mountain car's detector is the "cusum" family's BernoulliCUSUM: its saved state comes
+    back; a state saved by the z-score CUSUM (an older checkpoint) gives a fresh detector instead of
+    a failure rate read from rewards."""
+    from sensorimotor.agent.detectors import CUSUM, BernoulliCUSUM
+
+    spec = MountainCarWorld(seed=0, n_eval=2).spec()
+    program = make_program(spec, 0)
+    detector = make_detector("cusum", **program.detector_params)
+    assert isinstance(detector, BernoulliCUSUM)
+    for v in [-0.2] * 40 + [-1.0, -1.0]:
+        detector.update(v)
+    daemon = AgentDaemon(bus=None, state_dir=str(tmp_path))
+    daemon.links[spec.world_id] = WorldLink("a", spec, program, Recorder(), detector)
+    daemon.checkpoint()
+    restored = daemon._load_checkpoint(spec)
+    assert restored is not None and isinstance(restored.detector, BernoulliCUSUM)
+    assert restored.detector.statistic == detector.statistic > 0
+    old = CUSUM(warmup=20, rate=0.05)
+    for v in [-0.3] * 40:
+        old.update(v)
+    path = str(tmp_path / f"{spec.world_id}.ckpt.npz")
+    write_checkpoint(path, dataclasses.replace(read_checkpoint(path), detector_state=old.state()))
+    restored = daemon._load_checkpoint(spec)
+    assert restored is not None and restored.detector is None  # attach makes a fresh one

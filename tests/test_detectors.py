@@ -125,10 +125,12 @@ def test_world_stream_of_the_gridworld_has_no_change_and_bench_cli_writes_the_ta
 
 
 def _episode_lengths(seed, n=5000, after=200):
-    """A driver's training episodes as the mountain car reports them, -(car steps) / 400: most near
-    100 steps, a 6 % tail of slow ones (200-400); after `n` a body change makes 60 % give up."""
+    """A driver's training episodes as the mountain car reports them, -(car steps) / 400, -1 for a
+    failed one: most near 100 steps, a 6 % tail of slow ones (200-399) and 3 % that fail; after `n`
+    a body change makes 60 % fail."""
     rng = np.random.default_rng(seed)
-    steps = np.where(rng.random(n) < 0.06, rng.uniform(200, 400, n), rng.normal(100, 30, n))
+    steps = np.where(rng.random(n) < 0.06, rng.uniform(200, 399, n), rng.normal(100, 30, n))
+    steps = np.where(rng.random(n) < 0.03, 400.0, steps)
     post = np.where(rng.random(after) < 0.6, 400.0, rng.normal(100, 30, after))
     return -np.clip(np.concatenate([steps, post]), 1, 400) / 400, n
 
@@ -150,22 +152,50 @@ def test_the_cusum_of_failures_ignores_a_skewed_streams_tail_and_still_sees_a_ru
             fa[name] += sum(i < n for i in alarms)
             if name == "failures":
                 after = [i - n for i in alarms if i >= n]
-                assert after and after[0] <= 15, (seed, after)
+                assert after and after[0] <= 20, (seed, after)
     assert fa["failures"] <= 2 and fa["failures"] * 10 < fa["z-score"], fa
 
 
+def test_a_body_that_fails_almost_always_is_not_flagged_again_and_again():
+    """Once the reference itself fails nearly always, a failure adds almost nothing: the detector
+    does not keep calling for relearning a body that cannot do better."""
+    for rate in (0.8, 0.9, 1.0):
+        x = np.where(np.random.default_rng(3).random(2000) < rate, -1.0, -0.3)
+        d = BernoulliCUSUM(failure=-1.0)
+        assert sum(d.update(v) for v in x) == 0, rate
+
+
 def test_bernoulli_cusum_is_the_log_likelihood_ratio_of_failures_and_saves_its_state():
-    d = BernoulliCUSUM(failure=0.0, shift=0.3, h=8.0, warmup=4, rate=0.02)
+    d = BernoulliCUSUM(failure=0.0, shift=0.3, h=8.0, warmup=4, p0_rate=0.02)
     for v in [1.0] * 6:  # 4 join the reference (lag 2), 2 wait: p0 = 0, floored at 0.02
         assert not d.update(v)
     assert d.reference == 0.0 and d.statistic == 0.0
     d.update(0.0)
     assert d.statistic == pytest.approx(np.log(0.32 / 0.02))
     saved = d.state()
-    e = BernoulliCUSUM(failure=0.0, shift=0.3, h=8.0, warmup=4, rate=0.02)
+    e = BernoulliCUSUM(failure=0.0, shift=0.3, h=8.0, warmup=4, p0_rate=0.02)
     e.restore(saved)
     assert e.update(0.0) is d.update(0.0) is False and e.statistic == pytest.approx(2 * np.log(16))
     assert e.update(0.0) is d.update(0.0) is True  # 3 * log(16) = 8.3 > 8
     assert e.statistic == d.statistic == 0.0
     with pytest.raises(ValueError):
         BernoulliCUSUM(shift=1.5)
+
+
+def test_the_cars_detector_on_its_recorded_streams_has_no_false_alarm_and_misses_no_harmful_change():
+    """The scorecard's mountain car streams, kept in docs/results (10 unperturbed seeds, the new
+    baseline and permute on seeds 0-5, the live changes of `sme reproduce mountaincar` and an early
+    one): the figures docs/body-changes.md quotes."""
+    from pathlib import Path
+
+    from sensorimotor.agent.programs.mountaincar import MountainCarProgram
+    from sensorimotor.tools.bench.score_streams import load, score_streams
+
+    path = Path(__file__).parent.parent / "docs/results/bench-changes-mountaincar/streams.jsonl.gz"
+    streams = load(str(path))
+    ours = score_streams(streams, "cusum", dict(MountainCarProgram.detector_params))
+    z = score_streams(streams, "cusum", {"warmup": 20, "rate": 0.05})
+    assert ours.samples == z.samples == 24_626 and ours.false_alarms == 0 and z.false_alarms == 41
+    harmful = {k: v for k, v in ours.delays.items() if k not in ("gain x2", "reverse")}
+    assert sum(len(v) for v in harmful.values()) == 15
+    assert all(d is not None and d <= 17 for v in harmful.values() for d in v), harmful

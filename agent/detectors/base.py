@@ -19,6 +19,8 @@ class DropDetector(abc.ABC):
     """
 
     name = "detector"
+    #: what `reference` is, in the drop event's text
+    reference_label = "reference"
 
     def __init__(self) -> None:
         self.drift_detected = False

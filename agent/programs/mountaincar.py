@@ -122,7 +122,9 @@ class MountainCarProgram(Program):
     # CUSUM fires on their clusters (41 false alarms in 22,563 unperturbed episodes of 10 seeds):
     # the CUSUM of given-up episodes instead, tuned to a rise of 0.3 in their rate (0 there, every
     # harmful change recorded seen within 17 episodes: docs/body-changes.md)
-    detector_params = {"failure": -1.0, "shift": 0.3, "h": 8.0, "warmup": 20, "rate": 0.02}
+    # (`rate` is for the detectors of values a user may choose instead: they follow an improving
+    # driver within some 20 episodes)
+    detector_params = {"failure": -1.0, "shift": 0.3, "h": 8.0, "warmup": 20, "p0_rate": 0.02, "rate": 0.05}
 
     Params = MountainCarProgramParams
     params: MountainCarProgramParams
@@ -474,7 +476,7 @@ class MountainCarProgram(Program):
             if self._watching and self._ep_steps >= self.report_after:
                 # a trained driver gives up an episode this long: it is reported and a new one
                 # begins, so a failing body shows itself every `report_after` steps, not once per timeout
-                return self._end_training_episode()
+                return self._end_training_episode(reached=False)
         return Decision((float(REVERSE + a),))
 
     def _episode_over(self, obs: Observation) -> Decision:
@@ -508,21 +510,22 @@ class MountainCarProgram(Program):
         if reached and self._s is not None:
             assert self.sarsa is not None, "a state was driven from, so the driver exists"
             self.sarsa.learn_one(self._s, self._a, -1.0, self._s, None)
-        return self._end_training_episode()
+        return self._end_training_episode(reached)
 
-    def _end_training_episode(self) -> Decision:
+    def _end_training_episode(self, reached: bool) -> Decision:
         self.episodes += 1
         self.episode_log.append((self.training_steps, self._ep_steps))
         if self._watching and self._ep_steps > 0:
-            self._report(self._ep_steps)
+            self._report(self._ep_steps, reached)
         self._start_training_episode()
         if self.n_eval and self.training_steps // self.eval_every > len(self.curve):
             return self._begin_evaluation()
         return Decision(reset=True, start=-1)
 
-    def _report(self, steps: int) -> None:
-        """Performance of this episode, once: -(car steps) / report_after, in [-1, 0]."""
-        self._perf = -min(steps, self.report_after) / self.report_after
+    def _report(self, steps: int, reached: bool) -> None:
+        """Performance of this episode, once: -(car steps) / report_after, in [-1, 0); -1 for an
+        episode that failed (given up, or ended by the world before the goal)."""
+        self._perf = -min(steps, self.report_after - 1) / self.report_after if reached else -1.0
         self._watching = False
 
     def _begin_evaluation(self) -> Decision:
