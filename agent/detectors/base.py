@@ -188,3 +188,24 @@ class ReferencedDetector(DropDetector):
         """Continue from a `state()` snapshot (reference moments included)."""
         super().restore(state)
         self._ref.restore(state["reference"])
+
+
+class SummedDetector(ReferencedDetector):
+    """A referenced detector whose statistic is a one-sided sum S, saved with it (the CUSUMs)."""
+
+    def _clear(self) -> None:
+        self._s = 0.0
+
+    @property
+    def statistic(self) -> float:
+        """The sum S (a drop when it exceeds the detector's threshold `h`)."""
+        return self._s
+
+    def state(self) -> dict[str, Any]:
+        """The referenced detector's snapshot plus the sum S."""
+        return {**super().state(), "s": self._s}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a `state()` snapshot of the same detector with the same settings."""
+        super().restore(state)
+        self._s = float(state["s"])

@@ -17,12 +17,11 @@ has a failure value (the mountain car's given-up episode, -1) asks for it by its
 from __future__ import annotations
 
 import math
-from typing import Any
 
-from sensorimotor.agent.detectors.base import ReferencedDetector
+from sensorimotor.agent.detectors.base import SummedDetector
 
 
-class BernoulliCUSUM(ReferencedDetector):
+class BernoulliCUSUM(SummedDetector):
     """One-sided Bernoulli CUSUM for a rise in the failure rate (see the module docstring).
 
     Parameters
@@ -61,28 +60,6 @@ class BernoulliCUSUM(ReferencedDetector):
             raise ValueError("shift must be in (0, 1), h > 0 and floor in (0, 0.5)")
         self.failure, self.shift, self.h, self.floor = failure, shift, h, floor
         self.reset()
-
-    def _clear(self) -> None:
-        self._s = 0.0
-
-    @property
-    def statistic(self) -> float:
-        """The summed log-likelihood ratio S (a drop when it exceeds `h`)."""
-        return self._s
-
-    @property
-    def reference(self) -> float:
-        """The reference failure rate p0 (before the floor); NaN before it has one."""
-        return self._ref.mean if self._ref.count else float("nan")
-
-    def state(self) -> dict[str, Any]:
-        """The referenced detector's snapshot plus the sum S."""
-        return {**super().state(), "s": self._s}
-
-    def restore(self, state: dict[str, Any]) -> None:
-        """Continue from a `state()` snapshot of a Bernoulli CUSUM with the same settings."""
-        super().restore(state)
-        self._s = float(state["s"])
 
     def _update(self, x: float) -> bool:
         failed = 1.0 if x <= self.failure else 0.0

@@ -6,12 +6,10 @@ N(0,1) data is about 5e4 steps and a 2-sigma drop is detected in about 7 steps."
 
 from __future__ import annotations
 
-from typing import Any
-
-from sensorimotor.agent.detectors.base import ReferencedDetector
+from sensorimotor.agent.detectors.base import SummedDetector
 
 
-class CUSUM(ReferencedDetector):
+class CUSUM(SummedDetector):
     """One-sided standardised CUSUM for drops (see the module docstring).
 
     Parameters
@@ -34,23 +32,6 @@ class CUSUM(ReferencedDetector):
             raise ValueError("k must be >= 0 and h > 0")
         self.k, self.h = k, h
         self.reset()
-
-    def _clear(self) -> None:
-        self._s = 0.0
-
-    @property
-    def statistic(self) -> float:
-        """The cumulative sum S (a drop when it exceeds `h`)."""
-        return self._s
-
-    def state(self) -> dict[str, Any]:
-        """The referenced detector's snapshot plus the sum S."""
-        return {**super().state(), "s": self._s}
-
-    def restore(self, state: dict[str, Any]) -> None:
-        """Continue from a `state()` snapshot of a CUSUM with the same settings."""
-        super().restore(state)
-        self._s = float(state["s"])
 
     def _update(self, x: float) -> bool:
         ref = self._ref
