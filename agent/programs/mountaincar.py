@@ -117,13 +117,10 @@ class MountainCarProgram(Program):
     """
 
     name = "mountaincar"
-    # one value per training episode, -1 for one given up. Episode lengths are skewed (a tail of
-    # slow but successful ones; a driver that still learns has stretches of them), and a z-score
-    # CUSUM fires on their clusters (41 false alarms in 22,563 unperturbed episodes of 10 seeds):
-    # the CUSUM of given-up episodes instead, tuned to a rise of 0.3 in their rate (0 there, every
-    # harmful change recorded seen within 17 episodes: docs/body-changes.md)
-    # (`rate` is for the detectors of values a user may choose instead: they follow an improving
-    # driver within some 20 episodes)
+    # one value per training episode, -1 for a failed one. The lengths are skewed (a tail of slow
+    # but successful episodes), so the CUSUM of failures rather than of z-scores (`failure`: see
+    # agent/detectors/bernoulli_cusum.py and docs/body-changes.md); `rate` serves the detectors of
+    # values a user may choose instead (a reference that follows an improving driver in ~20 episodes)
     detector_params = {"failure": -1.0, "shift": 0.3, "h": 8.0, "warmup": 20, "p0_rate": 0.02, "rate": 0.05}
 
     Params = MountainCarProgramParams
