@@ -12,7 +12,7 @@ from sensorimotor.tools.bench import changes as C
 from sensorimotor.tools.bench.changes_life import LifeBudget, life
 from sensorimotor.tools.bench.zoo import ZooWorld
 from sensorimotor.tools.commands.demo import change_summary, parse_perturb
-from sensorimotor.tools.commands.watch import change_mark
+from sensorimotor.tools.commands.watch import change_mark, format_change
 from sensorimotor.tools.common import UsageError
 
 pytest.importorskip("river", reason="ADWIN and Page-Hinkley come from river: pip install -e '.[experiments]'")
@@ -112,10 +112,16 @@ def test_demo_perturb_is_parsed_and_its_summary_says_when_noticed_and_how_well_r
     assert "v2 at step 9,000, 8,000 steps after the change, error 0.0600 (before the change 0.0500, 1.20x)" in text
     assert "not noticed" in change_summary("reverse", 1_000, None, emb[:1], ev[:1])[-1]
     assert "not applied" in change_summary("reverse", None, None, [], [])[0]
+    # the world's report says when the change was applied (a queued control waits for a step)
+    ev[0] = AgentEvent("a", "w", EventKind.WORLD_EVENT, "moves swapped", 1_003, reason="control_applied")
+    text = "\n".join(change_summary("reverse", 1_000, None, emb, ev))
+    assert "at step 1,003 (moves swapped)" in text and "noticed at step 1,008: 5 steps" in text
 
 
 def test_watch_and_view_mark_the_change_its_noticing_and_the_relearned_map():
     assert change_mark(WorldEventKind.CONTROL_APPLIED) == "change"
+    applied = WorldEvent("w", WorldEventKind.CONTROL_APPLIED, "reverse", "moves swapped", 4001)
+    assert format_change(applied) == ">> [w] change (step 4001): reverse: moves swapped"
     assert change_mark(EventKind.WORLD_EVENT, "control_applied") == "change"
     assert change_mark(EventKind.DROP_DETECTED) == "noticed" and change_mark(EventKind.RELEARNED) == "relearned"
     assert change_mark(EventKind.POLICY_ITERATION) is None

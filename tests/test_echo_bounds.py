@@ -62,7 +62,7 @@ def test_a_refused_control_of_a_megabyte_gives_a_bounded_event_and_log(caplog) -
     big = "p" * (1 << 20)  # the world's error quotes the bad value: a megabyte, unclipped
     node._controls.append(Control(node.world_id, "gain", {"gain": big}, id=7))
     with caplog.at_level("INFO"):
-        node._apply_controls()
+        node._apply_controls(1)
     events = [codec.decode(WorldEvent, p) for p in bus.puts]
     assert [e.kind for e in events] == ["control_refused"] and events[0].control_id == 7
     assert "gain='ppp" in events[0].detail and "(1048576 characters)" in events[0].detail

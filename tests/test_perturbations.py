@@ -206,7 +206,9 @@ def test_over_the_bus_a_refused_control_is_reported_and_the_world_stays_up(procs
         # the world is still up and still takes a good control
         bus.put(keys.world_ctl("r7"), codec.encode(Control("r7", "noise", {"sd": "0.01"})), codec.schema_name(Control))
         assert wait_for(lambda: world_events(WorldEventKind.CONTROL_APPLIED), 30), events
-        assert "sd 0.01" in world_events(WorldEventKind.CONTROL_APPLIED)[0].detail
+        applied = world_events(WorldEventKind.CONTROL_APPLIED)[0]
+        assert "sd 0.01" in applied.detail
+        assert applied.step > steps  # the first observation of the changed body
     assert wait_for(lambda: link(status(endpoint), "r7").steps > steps + 20, 30)
     assert world.poll() is None and agent.poll() is None
 

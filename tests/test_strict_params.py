@@ -271,12 +271,12 @@ def test_controls_at_and_beyond_the_limits_are_applied_or_refused_never_more(wid
     node, bus = _node("r1", "retina")
     ctl = Control(wid, kind, params, 5)
     node._on_control(BusMessage(keys.world_ctl("r1"), codec.encode(ctl), ""))
-    node._apply_controls()
+    node._apply_controls(7)
     events = [codec.decode(WorldEvent, p) for k, p in bus.puts if k == keys.world_event("r1")]
     assert len(events) == 1 and events[0].control_id == 5
     assert all(len(p) < 4000 for k, p in bus.puts if k == keys.world_event("r1"))  # bounded echo
     if events[0].kind == "control_applied":
-        assert wid == "r1"
+        assert wid == "r1" and events[0].step == 7  # the first observation of the changed body
         check_perturbation("retina", world_perturbations("retina"), ctl)  # it did parse strictly
     else:
         assert events[0].kind == "control_refused"

@@ -288,7 +288,9 @@ class WorldNode:
         return self._truth_bytes
 
     # main loop ---------------------------------------------------------------------------------
-    def _apply_controls(self) -> None:
+    def _apply_controls(self, step: int) -> None:
+        """Apply the queued controls before the action that answers observation `step - 1`: `step`
+        is the first observation of the changed body, the step the events carry."""
         with self._ctl_lock:
             todo, self._controls = self._controls, []
         for ctl in todo:
@@ -302,6 +304,7 @@ class WorldNode:
                         WorldEventKind.CONTROL_APPLIED,
                         ctl.kind,
                         what,
+                        step,
                         session=self.session,
                         timestamp=time.time(),
                         control_id=ctl.id,
@@ -320,6 +323,7 @@ class WorldNode:
                         WorldEventKind.CONTROL_REFUSED,
                         ctl.kind,
                         str(e),
+                        step,
                         session=self.session,
                         timestamp=time.time(),
                         control_id=ctl.id,
@@ -337,7 +341,7 @@ class WorldNode:
                 self._t_warm, self._cpu_warm = now, time.process_time()
             st.measured_steps += 1
         if self._controls:  # (most steps have none: no lock taken on the hot path)
-            self._apply_controls()
+            self._apply_controls(lock.step + 1)
         episode = lock.episode
         refused = lock.advance(act)
         if refused is not None:

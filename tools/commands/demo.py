@@ -110,6 +110,8 @@ def change_summary(
     refused = [e for e in events if e.kind == EventKind.WORLD_EVENT and e.reason == "control_refused"]
     if refused and not applied:
         return [f"  body change {kind} at step {at:,}: refused by the world ({refused[0].detail})"]
+    if applied and applied[0].step > 0:
+        at = applied[0].step  # the world's own word: the first observation of the changed body
     lines = [f"  body change {kind} at step {at:,}" + (f" ({applied[0].detail})" if applied else "")]
     drop = next((e for e in events if e.kind == EventKind.DROP_DETECTED and e.step >= at), None)
     if drop is None:

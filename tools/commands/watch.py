@@ -48,7 +48,8 @@ def change_mark(kind: str, reason: str = "") -> str | None:
 def format_change(ev: WorldEvent) -> str:
     """A world's report of a control as one marked line."""
     mark = change_mark(ev.kind) or ev.kind
-    return f">> [{ev.world_id}] {mark}: {ev.reason}: {ev.detail}"
+    at = f" (step {ev.step})" if ev.step else ""
+    return f">> [{ev.world_id}] {mark}{at}: {ev.reason}: {ev.detail}"
 
 
 def world_event_dict(ev: WorldEvent) -> dict[str, object]:
