@@ -128,6 +128,7 @@ class Restoring(Publishing):
             same_kind = saved.detector_state is not None and saved.detector_state.get("name") == fresh.name
             detector = fresh if same_kind else None
             # arrays of the shapes this world's program keeps, before anything is restored from them
+            program.take_layout(saved.program_state)
             check_shapes(saved.program_state, program.state(), "program_state")
             if detector is not None and saved.detector_state is not None:
                 check_shapes(saved.detector_state, detector.state(), "detector_state")

@@ -55,3 +55,13 @@ def test_a_gridworld_that_lost_a_motor_is_relearned_to_the_map_its_body_can_draw
     assert r["applied"] and r["detected"] and 0.4 < r["harm"] < 0.6, r
     assert r["steps_to_relearned"] is not None and r["fresh_error"] is not None, r
     assert r["relearned_error"] <= 1.5 * max(r["fresh_error"], r["error_before"]), r
+
+
+def test_an_arm_whose_actions_act_late_is_relearned_over_lspi_with_the_last_action_in_the_state():
+    """`delay 1` on the arm seen by its camera (LSPI over PCA + RBF features): outcomes alternate
+    while relearning, so the state becomes the frame with the action sent last (one block of
+    features per last action) and the delayed body is mapped as before."""
+    g = family("Arm Kuka iiwa, 2 joints (sme world arm)")
+    r = C.run_one(g, C.pick_changes(["delay 1"], g.changes)[0], 2, C.Budget(5_000, 20_000, 15_000, 0))
+    assert r["applied"] and r["detected"] and r["harm"] >= 0.5, r
+    assert r["error_at_1.5x"] is not None and r["error_at_1.5x"] <= 1.5 * r["error_before"], r

@@ -27,7 +27,7 @@ from sensorimotor.agent.daemon import AgentDaemon
 from sensorimotor.agent.detectors import DETECTORS, make_detector
 from sensorimotor.agent.link import WorldLink
 from sensorimotor.agent.programs.registry import make_program
-from sensorimotor.protocol.messages import Action, Embedding, Observation
+from sensorimotor.protocol.messages import Action, Control, Embedding, Observation
 from sensorimotor.tools.inprocess import run_inprocess
 from sensorimotor.worlds.gridworld import GridWorld
 from sensorimotor.worlds.mountaincar import MountainCarWorld
@@ -136,6 +136,24 @@ def mountaincar():
     return MountainCarWorld(seed=0, n_eval=2, n_positions=8, max_car_steps=60)
 
 
+def arm_turned_late():
+    """The arm seen by its camera (LSPI), whose actions act a step late from its 8,000th step: saved
+    while relearning with the action sent last in the state."""
+    from sensorimotor.tools.bench.changes_families import family
+
+    w = family("Arm Kuka iiwa, 2 joints (sme world arm)").build(2)
+    step, n = w.step, [0]
+
+    def late(values):
+        n[0] += 1
+        if n[0] == 8000:
+            w.perturb(Control(w.world_id, "delay", {"steps": "1"}))
+        return step(values)
+
+    w.step = late
+    return w
+
+
 # (world factory, program hint override, program params, steps before (or a condition on the program to
 # run until), steps after, embeddings expected after)
 CASES = {
@@ -160,6 +178,8 @@ CASES = {
         1500,
         0,
     ),
+    # LSPI features of the frame with the action sent last, saved while relearning a delayed body
+    "generic-history": (arm_turned_late, None, {}, lambda p: p._history and p.new_samples > 100, 1500, 0),
     # saved while the eyes look either side of a fixation (the sub-step reading in flight)
     "mountaincar-aside": (
         mountaincar,

@@ -14,10 +14,21 @@ from sensorimotor.agent.learners.lspi import LSPI, TabularBasis
 
 class RBFFeatures:
     """LSPI basis over observation ids: id -> stored (projected) observation -> PCA -> RBFs, one
-    block of `centres + 1` features per action. Refitted between policy iterations."""
+    block of `centres + 1` features per action. Refitted between policy iterations.
 
-    def __init__(self, store: np.ndarray, n_actions: int, n_centres: int) -> None:
+    With `hist` (one small integer per stored row, 0 .. `n_hist` - 1: the action sent before the
+    observation, plus one) the state is the observation *and* that action: each action's block is
+    `n_hist` blocks, one per value, so a body whose actions act a step late is a function of the
+    state again (`agent.programs.generic_relearn`)."""
+
+    def __init__(
+        self, store: np.ndarray, n_actions: int, n_centres: int, hist: np.ndarray | None = None, n_hist: int = 1
+    ) -> None:
+        if (hist is None) != (n_hist == 1) or n_hist < 1:
+            raise ValueError("RBFFeatures: hist and n_hist > 1 go together")
         self.store = store
+        self.hist = hist
+        self.n_hist = n_hist
         self.n_actions = n_actions
         self.m = n_centres + 1
         self.mean = np.zeros(store.shape[1])
@@ -30,7 +41,12 @@ class RBFFeatures:
 
     @property
     def k(self) -> int:
-        return self.m * self.n_actions
+        return self.m * self.n_actions * self.n_hist
+
+    def q(self, w: np.ndarray, x: np.ndarray, h: int = 0) -> np.ndarray:
+        """The value of each action at the (projected) observation `x` after history value `h`."""
+        f = self.features(x)[0]
+        return np.asarray(w).reshape(self.n_actions, self.n_hist, self.m)[:, h, :] @ f
 
     def forget(self, rows: np.ndarray | int | slice) -> None:
         """Stored rows were overwritten: their cached features are stale."""
@@ -82,8 +98,10 @@ class RBFFeatures:
             self._cache[todo] = self.features(self.store[todo].astype(np.float64))
             self._cached[todo] = True
         f = self._cache[rows]
-        # one block of m features per row, at the column block of its action: sparse, 1/n_actions dense
-        cols = (a[:, None] * self.m + np.arange(self.m)[None, :]).ravel()
+        # one block of m features per row, at the column block of its action (and history value):
+        # sparse, 1/(n_actions n_hist) dense
+        block = a if self.hist is None else a * self.n_hist + self.hist[rows].astype(np.int64)
+        cols = (block[:, None] * self.m + np.arange(self.m)[None, :]).ravel()
         return sp.csr_matrix((f.ravel(), cols, np.arange(0, f.size + 1, self.m)), shape=(rows.size, self.k))
 
 
@@ -116,16 +134,19 @@ def iterate_job(
     refit: np.ndarray | None,
     fit: dict[str, Any],
     tie_tolerance: float = 0.05,
+    hist: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Feature refit (when `refit` holds the reservoir sample) and up to `iterations` LSPI
     iterations over a snapshot of the samples: the new basis (if refitted), weights, iterations
-    done and the last change. Tabular when `store` is None. A pure function, run off the act path."""
+    done and the last change. Tabular when `store` is None; `hist`: the stored rows' history values
+    (`RBFFeatures`, `fit["n_hist"]` of them). A pure function, run off the act path."""
     if store is None:
         lspi = LSPI(
             TabularBasis(n_states, n_actions), gamma=gamma, ridge=ridge, capacity=capacity, tie_tolerance=tie_tolerance
         )
     else:
-        rbf = RBFFeatures(np.asarray(store), n_actions, int(fit["centres"]))
+        h = None if hist is None else np.asarray(hist)
+        rbf = RBFFeatures(np.asarray(store), n_actions, int(fit["centres"]), h, int(fit.get("n_hist", 1)))
         if refit is not None:
             rbf.fit(
                 np.asarray(refit, dtype=np.float64), int(fit["components"]), int(fit["centres"]), float(fit["width"])

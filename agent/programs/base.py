@@ -206,6 +206,11 @@ class Program(abc.ABC):
             out["background"] = self.background.state()
         return out
 
+    def take_layout(self, state: dict[str, Any]) -> None:
+        """Before `state`'s arrays are checked against this program's `state()` and restored: take
+        the layout they were saved in, where a mode the program entered while running changes the
+        shape of what it keeps (the generic program remembering the last action). Default: none."""
+
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from a `state()` snapshot of a program built with the same spec and params."""
         self.seed = int(state["seed"])

@@ -253,7 +253,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         self._best_disparity = None
         self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
         self._relearn_unconfirmed, self._chance_seen = 0, False
-        self._accepted_basis, self._sweep_rbf = None, None
+        self._accepted_basis, self._sweep_rbf, self._sweep_basis = None, None, None
         self._transitions.clear()
         self._rotations = None
         self.emit(

@@ -80,6 +80,9 @@ class GenericBase(Program):
     _store: np.ndarray
     _reservoir: np.ndarray
     _rbf: RBFFeatures
+    _store_hist: np.ndarray  # lspi: each stored row's history value (generic_relearn; 0: none)
+    _history: bool  # the state is the observation with the action sent last (generic_relearn)
+    _hist: int  # that action (-1: none yet this episode)
     _next_id: int
     _seen: int
     _fitted_at: int
@@ -219,6 +222,7 @@ class GenericBase(Program):
         i = self._next_id
         self._next_id += 1
         self._store[i % self._store.shape[0]] = x
+        self._store_hist[i % self._store.shape[0]] = self._hist_value()
         self._rbf.forget(i % self._store.shape[0])
         self._seen += 1  # reservoir sampling: every observation seen is equally likely to be kept
         r = self._reservoir.shape[0]
@@ -247,8 +251,12 @@ class GenericBase(Program):
         if self.tabular:
             return np.asarray(w).reshape(self.n_states, self.n_actions)[self._table_id(obs)]
         rbf = self._sweep_rbf if self._sweep_rbf is not None else self._rbf
-        f = rbf.features(self._vector(obs))[0]
-        return w.reshape(self.n_actions, -1) @ f
+        return rbf.q(w, self._vector(obs), self._hist_value())
+
+    def _hist_value(self) -> int:
+        """The history value of the observation at hand: the action sent last plus one (0: none, or
+        not remembering)."""
+        return self._hist + 1 if self._history else 0
 
     def _goal_reward(self, obs: Observation) -> float:
         return 1.0 if reached(self.goal, obs) else 0.0
@@ -339,9 +347,16 @@ class GenericBase(Program):
         """An RBF basis in the state `basis` (None for None)."""
         if basis is None:
             return None
-        rbf = RBFFeatures(self._store, self.n_actions, self.params.centres)
+        rbf = self._new_rbf()
         set_basis(rbf, basis)
         return rbf
+
+    def _new_rbf(self) -> RBFFeatures:
+        """An (unfitted) RBF basis over the store, of the observation with the action sent last
+        when the program remembers it."""
+        if self._history:
+            return RBFFeatures(self._store, self.n_actions, self.params.centres, self._store_hist, self.n_actions + 1)
+        return RBFFeatures(self._store, self.n_actions, self.params.centres)
 
     def _accepted_rbf(self) -> RBFFeatures | None:
         """The RBF basis the accepted weights are over, when it is not the current one."""

@@ -32,6 +32,7 @@ from scipy.optimize import linear_sum_assignment
 
 from sensorimotor.agent.learners.base import TableLearner
 from sensorimotor.agent.learners.lspi import TabularBasis
+from sensorimotor.agent.learners.lspi_features import basis_state, set_basis
 from sensorimotor.agent.programs.base import Decision, EventOutput
 from sensorimotor.agent.programs.generic_base import GenericBase
 from sensorimotor.protocol.messages import EventKind, Observation
@@ -85,7 +86,8 @@ class GenericRelearn(GenericBase):
     def _become_stochastic(self, step: int) -> None:
         """Outcomes alternated: while relearning a discrete body over a table, try a state that
         remembers the last action first (see the module); else the world is stochastic."""
-        if self._history or self.relearn_at is None or self.model is None or not self.discrete:
+        remembers = self.model is not None or self.learner == "lspi"
+        if self._history or self.relearn_at is None or not remembers or not self.discrete:
             super()._become_stochastic(step)
             return
         self._history_due = True
@@ -123,23 +125,43 @@ class GenericRelearn(GenericBase):
             trace.pop()
 
     def _enter_history(self, step: int) -> None:
-        """A table of (observation, last action) learned afresh, relearning from here."""
-        assert self.model is not None and self.relearn_at is not None
-        self._history_due, self._history, self.keyed = False, True, True
-        self._ids, self._said_table_full = {}, False
-        self.lspi.basis = self._init_table(type(self.model), False)
+        """A table of (observation, last action), or LSPI features of both, learned afresh,
+        relearning from here."""
+        assert self.relearn_at is not None
+        self._history_due = False
+        if self.model is not None:
+            self._ids, self._said_table_full = {}, False
+        self._remember_last_action()
         keep = self._before, self._order_before
         self.on_drop(self.relearn_at)
         self._before, self._order_before = keep
+        what = (
+            f"a table of up to {self.n_states} of them"
+            if self.model is not None
+            else f"LSPI features of the observation, one block per last action ({self._rbf.k} in all)"
+        )
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
-                "outcomes alternate after the body changed: the state is the observation with the last action "
-                f"sent, a table of up to {self.n_states} of them",
+                f"outcomes alternate after the body changed: the state is the observation with the last action sent, {what}",
                 step,
                 reason="history",
             )
         )
+
+    def _remember_last_action(self) -> None:
+        """The state becomes the observation with the action sent last: a table of distinct pairs, or
+        (LSPI) the same fitted RBFs of the observation, one block per last action."""
+        self._history = True
+        if self.model is not None:
+            self.keyed = True
+            self.lspi.basis = self._init_table(type(self.model), False)
+        else:
+            fitted = basis_state(self._rbf)
+            self._rbf = self._new_rbf()
+            set_basis(self._rbf, fitted)
+            self.lspi.basis = self._rbf
+            self.lspi.reset()
 
     def _pick(self, q: np.ndarray, prefer: int | None) -> int:
         """The greedy action for `q`: near-ties broken by `prefer`, else by the tie order."""
@@ -169,6 +191,11 @@ class GenericRelearn(GenericBase):
         """The relearned map is published: its order stays (until the next drop)."""
         self._before = None
 
+    def take_layout(self, state: dict[str, Any]) -> None:
+        """A saved LSPI that remembered the last action keeps a block of weights per last action."""
+        if self.learner == "lspi" and bool(state.get("history", False)) and not self._history:
+            self._remember_last_action()
+
     def relearn_state(self) -> dict[str, Any]:
         return {
             "tie_order": None if self._tie_order is None else self._tie_order.tolist(),
@@ -187,10 +214,10 @@ class GenericRelearn(GenericBase):
         b = state.get("before")
         self._before = None if b is None else {(bytes.fromhex(k), int(a)): bytes.fromhex(n) for k, a, n in b}
         self._history_due, self._hist = bool(state.get("history_due", False)), int(state.get("hist", -1))
-        if bool(state.get("history", False)) and not self._history and self.model is not None:
-            # the table of (observation, last action) the saved model is of (its rows: the saved ids)
-            self._history, self.keyed = True, True
-            self.lspi.basis = self._init_table(type(self.model), False)
+        if bool(state.get("history", False)) and not self._history:
+            # the table of (observation, last action) the saved model is of (its rows: the saved
+            # ids), or the LSPI basis the saved weights are over (its fit restored after)
+            self._remember_last_action()
 
 
 __all__ = ["GenericRelearn", "inherit_order"]

@@ -85,12 +85,14 @@ class GenericState(GenericRelearn):
             out.update(lo=self._lo.copy(), span=self._span.copy())
         elif self.learner == "lspi":
             out.update(store=self._store.copy(), reservoir=self._reservoir.copy(), basis=basis_state(self._rbf))
+            out["store_hist"] = self._store_hist.copy()
         return out
 
     def restore(self, state: dict[str, Any]) -> None:
         super().restore(state)
         self.stochastic = bool(state.get("stochastic", False))
         self._plan_for_chance()  # the capacity the saved samples were kept under
+        self.take_layout(state)  # the basis the saved weights are over
         self.lspi.restore(state["lspi"])
         self.phase, self.new_samples = str(state["phase"]), int(state["new_samples"])
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
@@ -184,4 +186,6 @@ class GenericState(GenericRelearn):
         elif self.learner == "lspi":
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
+            if "store_hist" in state:  # (absent in older checkpoints: no history then)
+                self._store_hist[...] = np.asarray(state["store_hist"], dtype=np.int16)
             set_basis(self._rbf, state["basis"])

@@ -51,7 +51,8 @@ class GenericTables(GenericBase):
         self._proj = proj_rng.standard_normal((d, self.dim)) / np.sqrt(self.dim) if d > prm.projection else None
         self._store = np.zeros((2 * prm.max_samples + 2, self.dim), dtype=np.float32)
         self._reservoir = np.zeros((prm.reservoir, self.dim), dtype=np.float32)
-        self._rbf = RBFFeatures(self._store, self.n_actions, prm.centres)
+        self._store_hist = np.zeros(self._store.shape[0], dtype=np.int16)
+        self._rbf = self._new_rbf()
         return self._rbf
 
     def _iterate(self) -> None:
@@ -64,6 +65,7 @@ class GenericTables(GenericBase):
             refit = self._reservoir[:n].astype(np.float64)
             self._fitted_at = self._seen
         assert self.background is not None
+        n_hist = 1 if self.tabular else self._rbf.n_hist
         self.background.submit(
             "lspi",
             iterate_job,
@@ -77,8 +79,9 @@ class GenericTables(GenericBase):
             store=None if self.tabular else self._store.copy(),
             basis=None if self.tabular else basis_state(self._rbf),
             refit=refit,
-            fit={"components": prm.components, "centres": prm.centres, "width": prm.width},
+            fit={"components": prm.components, "centres": prm.centres, "width": prm.width, "n_hist": n_hist},
             tie_tolerance=self.lspi.tie_tolerance,
+            hist=self._store_hist.copy() if n_hist > 1 else None,
         )
 
     def _iterated(self, result: dict[str, Any], step: int) -> None:
