@@ -16,9 +16,11 @@ A change that matches nothing (a new body whose moves are all new) keeps the ord
 A body whose actions act late (``delay``) is no longer a function of the observation: the same
 observation and action lead to different observations, depending on the action before. While
 relearning after a drop, outcomes that alternate are therefore first taken for a body that remembers:
-the table's state becomes the observation with the action sent last (a table of distinct
-(observation, last action) pairs, learned afresh), in which a one-step delay is deterministic again;
-a trace's last action, sent when the goal was already on its way, never acts and is dropped.
+the state becomes the observation with the action sent last - for a table learner a table of
+distinct (observation, last action) pairs, for LSPI (camera frames, long vectors) the fitted RBF
+features of the observation, one block per last action - learned afresh, in which a one-step delay
+is deterministic again; a trace's last action, sent when the goal was already on its way, never
+acts and is dropped.
 If outcomes still alternate there, the world is taken as stochastic, as before. Learning from
 scratch (no drop) keeps the old rule: alternating outcomes mean a stochastic world.
 """
