@@ -132,6 +132,7 @@ class GenericBase(Program):
     _last_choice: int
     retried_total: int
     _chance_seen: bool  # outcomes alternated while watched: the accepted policy is checked first
+    _regauge: bool  # `distance=auto` changed after the policy was watched (generic_continuous)
 
     @property
     def stochastic(self) -> bool:

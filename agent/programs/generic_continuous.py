@@ -45,6 +45,7 @@ class GenericContinuous(GenericBase):
     _half_actions: np.ndarray | None = None
     #: `distance=auto` resolved (None: not yet; a box planner's sweeps decide, see `_trace_distance`)
     _distance: str | None = None
+    _regauge = False  # the distance changed after the policy was watched: its map is published again
     _distance_now: str = "padded"
     #: the fraction of each bound the plan's moves span now
     _scale: float = 1.0
@@ -404,10 +405,10 @@ class GenericContinuous(GenericBase):
         then it is settled (a policy's rank by where its traces end follows it: `_by_ends`)."""
         if self.params.distance != "auto":
             return self.params.distance
-        if self._distance is not None or step is None:
+        if self._distance == "net" or step is None:
             return self._distance or self._distance_now
         if self.discrete or self.learner != "planner" or not self._ends:
-            return "padded"
+            return self._distance or "padded"
         traces, k = self._sweep.traces, max(1, self._sweep.repeats)
         rows = [(i, v) for i, v in sorted(self._ends.items()) if (i + 1) * k <= len(traces)]
         nets = np.array(
@@ -415,6 +416,13 @@ class GenericContinuous(GenericBase):
         ).reshape(len(rows), -1)
         moved = np.array([v[1] - v[0] for _, v in rows]).reshape(len(rows), -1)
         adds = moves_add_up(nets, moved)
+        if self._distance == "padded":
+            # settled on a sweep whose ends were not linear in the moves, which over camera frames
+            # can be the motor coordinates' own error on a poorer policy: a later sweep whose moves
+            # add up changes it (the accepted map is published again under the net move: `_swept`)
+            if not adds:
+                return "padded"
+            self._regauge = True
         self._distance_now = "net" if adds else "padded"
         if adds is not None and (self._watching or adds):
             self._distance = self._distance_now

@@ -223,6 +223,15 @@ class GenericSweeps(GenericRelearn):
                 )
             )
         self._trace_distance(step)  # `distance=auto`: this sweep's traces may settle it (generic_continuous)
+        if self._regauge:
+            self._regauge = False
+            if self._watching and self._accepted_traces and self._accepted_reached:
+                # the accepted policy's map under the distance now in force; ranked by ends afresh
+                self.phase, self._best_disparity, self._checking = "explore", None, True
+                acc = (self._accepted_traces, self._accepted_reached)
+                self._embed(step, False, len(acc[0]) // self.spec.n_starts, of=acc)
+                self._checking = False
+                return None
         new = sweep_score(sw.reached, sw.traces)
         score = (new.fraction, new.length)
         exact = self._exact_plan()
