@@ -74,7 +74,7 @@ class GenericRelearn(GenericBase):
     _order_before: np.ndarray | None = None  # the order at the last drop
     _before: Transitions | None = None  # where each (observation, action) led before it; None: kept
 
-    _history = False  # the table's state is (observation, last action sent)
+    _history = False  # the state is (observation, last action sent): a table's key, LSPI's feature block
     _history_due = False  # outcomes alternated while relearning: history from the next step
     _hist = -1  # the action sent last in this episode (-1: none yet)
 
@@ -86,8 +86,8 @@ class GenericRelearn(GenericBase):
         return key + self._hist.to_bytes(2, "little", signed=True) if self._history else key
 
     def _become_stochastic(self, step: int) -> None:
-        """Outcomes alternated: while relearning a discrete body over a table, try a state that
-        remembers the last action first (see the module); else the world is stochastic."""
+        """Outcomes alternated: while relearning a discrete body (a table learner or LSPI), try a
+        state that remembers the last action first (see the module); else the world is stochastic."""
         remembers = self.model is not None or self.learner == "lspi"
         if self._history or self.relearn_at is None or not remembers or not self.discrete:
             super()._become_stochastic(step)
@@ -103,9 +103,9 @@ class GenericRelearn(GenericBase):
             self._hist = -1
 
     def _history_after(self, dec: Decision) -> Decision:
-        """The action sent, remembered for the next step's key (history mode)."""
-        if self._history:
-            self._hist = -1 if dec.reset or not dec.values else int(dec.values[0])
+        """The action sent, remembered at every step (so the step that enters history mode knows it):
+        in history mode, part of the next step's state (a table's key, LSPI's feature block)."""
+        self._hist = -1 if dec.reset or not dec.values or not self.discrete else int(dec.values[0])
         return dec
 
     def _moves(self, nxt: Transitions) -> Transitions:
@@ -216,9 +216,11 @@ class GenericRelearn(GenericBase):
         b = state.get("before")
         self._before = None if b is None else {(bytes.fromhex(k), int(a)): bytes.fromhex(n) for k, a, n in b}
         self._history_due, self._hist = bool(state.get("history_due", False)), int(state.get("hist", -1))
-        if bool(state.get("history", False)) and not self._history:
+        if not -1 <= self._hist < self.n_actions:
+            raise ValueError(f"saved last action {self._hist} is not one of the {self.n_actions} actions")
+        if bool(state.get("history", False)) and not self._history and self.model is not None:
             # the table of (observation, last action) the saved model is of (its rows: the saved
-            # ids), or the LSPI basis the saved weights are over (its fit restored after)
+            # ids); LSPI took its layout before its weights were restored (`take_layout`)
             self._remember_last_action()
 
 

@@ -187,5 +187,8 @@ class GenericState(GenericRelearn):
             self._store[...] = np.asarray(state["store"], dtype=np.float32)
             self._reservoir[...] = np.asarray(state["reservoir"], dtype=np.float32)
             if "store_hist" in state:  # (absent in older checkpoints: no history then)
-                self._store_hist[...] = np.asarray(state["store_hist"], dtype=np.int16)
+                h = np.asarray(state["store_hist"], dtype=np.int64)
+                if h.size and not (0 <= h.min() and h.max() < self._rbf.n_hist):
+                    raise ValueError(f"saved history values outside 0..{self._rbf.n_hist - 1}")
+                self._store_hist[...] = h
             set_basis(self._rbf, state["basis"])
