@@ -44,6 +44,7 @@ from sensorimotor.agent.learners.window_velocity import WindowVelocity
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.agent.programs.vergence import VergencePractice, foveal_difference
+from sensorimotor.agent.programs.vergence_roles import VergenceRoleProbe
 from sensorimotor.agent.snapshot import array_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
@@ -98,6 +99,12 @@ class MountainCarProgramParams:
         True,
         "read the position below one vergence step: at the goal the eyes look one step either side, "
         "and the foveal differences there place the minimum between steps (equiangular fit)",
+    )
+    probe_after: int = option(
+        300,
+        "vergence practice steps after a drop with no reward at all, before the program finds which of its "
+        "actions verge (agent/programs/vergence_roles.py: a body whose actions were exchanged)",
+        min=1,
     )
     recall_check: int = option(
         64,
@@ -209,9 +216,20 @@ class MountainCarProgram(Program):
         self.curve: list[tuple[int, float]] = []
         self.episode_log: list[tuple[int, int]] = []  # (training steps at the end, car steps) per training episode
         self.relearn_at: int | None = None
+        #: the body's action for each of the program's (converge, diverge, reverse, coast, forward);
+        #: found again by a probe when the actions were exchanged
+        self.body: tuple[int, ...] = tuple(range(5))
+        self._probe: VergenceRoleProbe | None = None
+        self._unrewarded = -1  # practice steps since a drop without a reward (-1: not counting)
 
     # stage 1: vergence ---------------------------------------------------------------------------
     def _explore(self, obs: Observation, d: float) -> Decision:
+        if self._unrewarded >= 0:
+            self._unrewarded = -1 if obs.reward > 0 else self._unrewarded + 1
+            if self._unrewarded >= self.params.probe_after:
+                self._unrewarded, self.phase = -1, "probe"
+                self._probe = VergenceRoleProbe(5)
+                return self._probe.begin()
         if self.practice.observe(obs, d, obs.reward > 0, self.emit):
             self.phase = "sweep"
             self._sweep = StartStateSweep(self.n_positions, self.max_trace)
@@ -538,12 +556,47 @@ class MountainCarProgram(Program):
 
     # Program interface ---------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
-        """Dispatch to the current stage: explore, sweep (then embed), or drive/evaluate."""
+        """Dispatch to the current stage: explore, sweep (then embed), or drive/evaluate (their
+        actions are the program's own, sent as the body's: `body`), or find which actions verge."""
+        if self.phase == "probe":
+            return self._probing(obs)
         if self.phase == "explore":
-            return self._explore(obs, foveal_difference(obs))
-        if self.phase == "sweep":
-            return self._sweeping(obs)
-        return self._drive(obs)
+            dec = self._explore(obs, foveal_difference(obs))
+            if self.phase == "probe":
+                return dec  # the probe's first step: a reset
+        elif self.phase == "sweep":
+            dec = self._sweeping(obs)
+        else:
+            dec = self._drive(obs)
+        if dec.values and self.body != tuple(range(5)):
+            return Decision((float(self.body[int(dec.values[0])]),), dec.reset, dec.start)
+        return dec
+
+    def _probing(self, obs: Observation) -> Decision:
+        """A step of the vergence role probe; when done, the roles found and vergence relearned."""
+        assert self._probe is not None
+        dec = self._probe.step(obs)
+        if dec is not None:
+            return dec
+        found = self._probe.roles()
+        self._probe = None
+        names = ("converge", "diverge", "reverse", "coast", "forward")
+        said = ", ".join(f"{n} {a}" for n, a in zip(names, found, strict=True))
+        self.emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"vergence practice found no reward after the drop: the actions that verge, found by "
+                f"their views, are {found[0]} and {found[1]} (the body's actions now: {said})",
+                obs.step,
+                reason="action_roles",
+            )
+        )
+        self.body = found
+        self.lspi.reset()
+        self.practice.reset()
+        self._verge = {}
+        self.phase, self._explore_len = "explore", 0
+        return Decision(reset=True, start=-1)
 
     def performance(self, obs: Observation) -> float | None:
         """-(car steps) / report_after of a training episode that just ended, once; else None."""
@@ -555,6 +608,7 @@ class MountainCarProgram(Program):
         if self.phase not in ("drive", "evaluate"):
             return
         self.relearn_at = step
+        self._unrewarded = 0
         self.lspi.reset()
         self._verge = {}
         self._forget()
@@ -632,6 +686,9 @@ class MountainCarProgram(Program):
             "recalls": self._recalls,
             "view": None if self._view is None else np.frombuffer(self._view, dtype=np.uint8).copy(),
             "checking": self._checking,
+            "body": list(self.body),
+            "unrewarded": self._unrewarded,
+            "probe": None if self._probe is None else self._probe.state(),
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -708,6 +765,15 @@ class MountainCarProgram(Program):
         view = state.get("view")
         self._view = None if view is None else np.asarray(view, dtype=np.uint8).tobytes()
         self._checking = None if state.get("checking") is None else float(state["checking"])
+        body = tuple(int(a) for a in state.get("body", range(5)))
+        if sorted(body) != list(range(5)):
+            raise ValueError(f"saved body actions {body} are not an order of the 5 actions")
+        self.body, self._unrewarded = body, int(state.get("unrewarded", -1))
+        probe = state.get("probe")
+        self._probe = None
+        if probe is not None:
+            self._probe = VergenceRoleProbe(5)
+            self._probe.restore(probe)
 
     def world_restarted(self) -> None:
         """Drop the pending vergence sample and restart the trace and episode in progress."""
