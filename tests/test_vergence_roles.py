@@ -19,7 +19,8 @@ def _probe(order: str | None) -> tuple[int, ...]:
     with family(CAR).build(0) as w:
         if order is not None:
             w.perturb(Control(w.world_id, "permute", {"order": order}))
-        lock, probe = Lockstep(w, w.world_id), VergenceRoleProbe(5)
+        # the program's start: the first evaluation state (a fixed state where the car moves)
+        lock, probe = Lockstep(w, w.world_id), VergenceRoleProbe(5, start=int(w.spec().params["n_positions"]))
         dec = probe.begin()
         steps = 0
         while dec is not None:
@@ -55,8 +56,7 @@ def test_a_probe_state_round_trips_and_a_bad_one_is_refused():
 
 def test_a_car_whose_actions_were_exchanged_finds_its_vergence_actions_and_draws_its_map_again():
     """`permute` (rotate): the actions the program verged with now diverge and drive. Noticed by its
-    failures; vergence practice then finds no reward, so the program probes which actions verge and
-    relearns the map it had."""
+    failures; the program probes which actions verge and relearns the map it had."""
     car = family(CAR)
     r = C.run_one(car, C.pick_changes(["permute"], car.changes)[0], 0, C.Budget(0, 700_000, 150_000, 0))
     assert r["applied"] and r["detected"] and r["harm"] >= 0.2, r

@@ -100,12 +100,6 @@ class MountainCarProgramParams:
         "read the position below one vergence step: at the goal the eyes look one step either side, "
         "and the foveal differences there place the minimum between steps (equiangular fit)",
     )
-    probe_after: int = option(
-        300,
-        "vergence practice steps after a drop with no reward at all, before the program finds which of its "
-        "actions verge (agent/programs/vergence_roles.py: a body whose actions were exchanged)",
-        min=1,
-    )
     recall_check: int = option(
         64,
         "a car step whose parallel-eye view was read before reuses that reading; every Nth reuse is "
@@ -220,16 +214,10 @@ class MountainCarProgram(Program):
         #: found again by a probe when the actions were exchanged
         self.body: tuple[int, ...] = tuple(range(5))
         self._probe: VergenceRoleProbe | None = None
-        self._unrewarded = -1  # practice steps since a drop without a reward (-1: not counting)
+        self._probe_first = False  # the probe's first step (a reset) is still to be sent
 
     # stage 1: vergence ---------------------------------------------------------------------------
     def _explore(self, obs: Observation, d: float) -> Decision:
-        if self._unrewarded >= 0:
-            self._unrewarded = -1 if obs.reward > 0 else self._unrewarded + 1
-            if self._unrewarded >= self.params.probe_after:
-                self._unrewarded, self.phase = -1, "probe"
-                self._probe = VergenceRoleProbe(5)
-                return self._probe.begin()
         if self.practice.observe(obs, d, obs.reward > 0, self.emit):
             self.phase = "sweep"
             self._sweep = StartStateSweep(self.n_positions, self.max_trace)
@@ -562,8 +550,6 @@ class MountainCarProgram(Program):
             return self._probing(obs)
         if self.phase == "explore":
             dec = self._explore(obs, foveal_difference(obs))
-            if self.phase == "probe":
-                return dec  # the probe's first step: a reset
         elif self.phase == "sweep":
             dec = self._sweeping(obs)
         else:
@@ -575,23 +561,27 @@ class MountainCarProgram(Program):
     def _probing(self, obs: Observation) -> Decision:
         """A step of the vergence role probe; when done, the roles found and vergence relearned."""
         assert self._probe is not None
+        if self._probe_first:
+            self._probe_first = False
+            return self._probe.begin()
         dec = self._probe.step(obs)
         if dec is not None:
             return dec
         found = self._probe.roles()
         self._probe = None
-        names = ("converge", "diverge", "reverse", "coast", "forward")
-        said = ", ".join(f"{n} {a}" for n, a in zip(names, found, strict=True))
-        self.emit(
-            EventOutput(
-                EventKind.POLICY_ITERATION,
-                f"vergence practice found no reward after the drop: the actions that verge, found by "
-                f"their views, are {found[0]} and {found[1]} (the body's actions now: {said})",
-                obs.step,
-                reason="action_roles",
+        if found[:2] != self.body[:2]:
+            names = ("converge", "diverge", "reverse", "coast", "forward")
+            said = ", ".join(f"{n} {a}" for n, a in zip(names, found, strict=True))
+            self.emit(
+                EventOutput(
+                    EventKind.POLICY_ITERATION,
+                    f"the actions that verge are now {found[0]} and {found[1]}, found by the views they give "
+                    f"(the body's actions: {said})",
+                    obs.step,
+                    reason="action_roles",
+                )
             )
-        )
-        self.body = found
+            self.body = found
         self.lspi.reset()
         self.practice.reset()
         self._verge = {}
@@ -604,16 +594,19 @@ class MountainCarProgram(Program):
         return out
 
     def on_drop(self, step: int) -> None:
-        """The body changed: relearn vergence (LSPI from scratch) and re-embed; Sarsa is kept."""
+        """The body changed: find which actions verge (`vergence_roles`), relearn vergence (LSPI
+        from scratch) and re-embed; Sarsa is kept."""
         if self.phase not in ("drive", "evaluate"):
             return
         self.relearn_at = step
-        self._unrewarded = 0
         self.lspi.reset()
         self._verge = {}
         self._forget()
         self.practice.reset()
-        self.phase, self._explore_len = "explore", 0
+        self.phase, self._explore_len = "probe", 0
+        evals = range(self.n_positions, self.n_positions + self.n_eval)  # fixed states, the car mostly moving
+        self._probe = VergenceRoleProbe(5, start=evals[0] if evals else -1)
+        self._probe_first = True
         self.emit(EventOutput(EventKind.RELEARNING, "vergence policy relearned from scratch, then re-embedded", step))
 
     # saved state ---------------------------------------------------------------------------------
@@ -687,8 +680,8 @@ class MountainCarProgram(Program):
             "view": None if self._view is None else np.frombuffer(self._view, dtype=np.uint8).copy(),
             "checking": self._checking,
             "body": list(self.body),
-            "unrewarded": self._unrewarded,
             "probe": None if self._probe is None else self._probe.state(),
+            "probe_first": self._probe_first,
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -768,11 +761,11 @@ class MountainCarProgram(Program):
         body = tuple(int(a) for a in state.get("body", range(5)))
         if sorted(body) != list(range(5)):
             raise ValueError(f"saved body actions {body} are not an order of the 5 actions")
-        self.body, self._unrewarded = body, int(state.get("unrewarded", -1))
+        self.body, self._probe_first = body, bool(state.get("probe_first", False))
         probe = state.get("probe")
         self._probe = None
         if probe is not None:
-            self._probe = VergenceRoleProbe(5)
+            self._probe = VergenceRoleProbe(5, start=int(probe.get("start", -1)))
             self._probe.restore(probe)
 
     def world_restarted(self) -> None:

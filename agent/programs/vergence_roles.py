@@ -1,17 +1,18 @@
-"""Which of the body's actions verge the eyes: a probe the mountain-car program runs when a changed
-body gives its vergence practice no reward at all (`permute`: the actions it used to converge and
-diverge with now drive the car).
+"""Which of the body's actions verge the eyes: a probe the mountain-car program runs after every drop,
+before it relearns vergence (`permute`: the actions it used to converge and diverge with now
+diverge and drive the car; `reverse`: they swapped).
 
 Why a probe, and why this one: the program reads the car's place from how far it converges its eyes
 (ch. 8), counting its own converge and diverge commands. A body whose actions were exchanged leaves
-no vergence policy over the old two, and no amount of practice with them finds the goal. What tells
+no vergence policy over the old two, or one whose count of converging steps runs backwards. What tells
 the actions apart is what each does to the view from a start with the eyes parallel: converging
 turns the eyes (a large change of the view), diverging from there turns them back (the very view
 again, and again: it stays parallel), and a drive moves the car and sets the eyes parallel (a view
-that drifts as the car goes on). So for every ordered pair of actions (c, b), from a random start:
-the view after c, then after b sent `repeats` times; the pair whose first action changes the view
-most and whose second brings it back most nearly is (converge, diverge). The other actions drive,
-in their order (the driver relearns which is which). 2 + `repeats` steps a pair: 100 for 5 actions.
+that drifts as the car goes on). So for every ordered pair of actions (c, b), from one start (a
+fixed state where the car moves): the view after c, then after b sent `repeats` times; the pair
+whose second action undoes the largest share of the first one's change of the view - all of it,
+for (converge, diverge) alone - is (converge, diverge). The other actions drive, in their order
+(the driver relearns which is which). 2 + `repeats` steps a pair: 100 for 5 actions.
 """
 
 from __future__ import annotations
@@ -77,7 +78,9 @@ class VergenceRoleProbe:
         assert self._base is not None and self._after is not None
         away = float(np.abs(self._after - self._base).mean())
         back = float(np.abs(v - self._base).mean())
-        self._scores.append(away - back)
+        # the share of c's change that b undid (1 for converge, diverge only; at least -1); -2: c
+        # changed nothing (diverging with the eyes parallel)
+        self._scores.append(max(1.0 - back / away, -1.0) if away > 1e-12 else -2.0)
         self._i, self._stage = self._i + 1, 0
         return None if self.finished else Decision(reset=True, start=self.start)
 
@@ -90,6 +93,7 @@ class VergenceRoleProbe:
 
     def state(self) -> dict[str, Any]:
         return {
+            "start": self.start,
             "i": self._i,
             "stage": self._stage,
             "base": None if self._base is None else self._base.copy(),
