@@ -19,7 +19,9 @@ performance, -(car steps) / report_after, when it ends; a trained driver gives u
 `report_after` car steps (a failing body would otherwise show itself only once per 1000-step
 timeout). A new camera baseline makes every
 trace longer, positions shift, episodes run long: the daemon's detector sees the drop and calls
-`on_drop`, and the program relearns its vergence policy and re-embeds. (Scoring episodes against
+`on_drop`, and the program first finds which of its actions verge (a body whose actions were
+exchanged: `vergence_roles`, 100 steps; `body` maps its own actions to the body's), then relearns
+its vergence policy and re-embeds. (Scoring episodes against
 the agent's own expectation, read off Sarsa's value, was tried first: Sarsa keeps learning and
 lowers its expectation within a few failing episodes, so the surprise faded before a detector saw
 it.) The new
@@ -569,7 +571,16 @@ class MountainCarProgram(Program):
             return dec
         found = self._probe.roles()
         self._probe = None
-        if found[:2] != self.body[:2]:
+        if found is None:
+            self.emit(
+                EventOutput(
+                    EventKind.POLICY_ITERATION,
+                    "no pair of actions turns the eyes and back: vergence is relearned with the actions as they were",
+                    obs.step,
+                    reason="action_roles",
+                )
+            )
+        elif found[:2] != self.body[:2]:
             names = ("converge", "diverge", "reverse", "coast", "forward")
             said = ", ".join(f"{n} {a}" for n, a in zip(names, found, strict=True))
             self.emit(
@@ -604,8 +615,8 @@ class MountainCarProgram(Program):
         self._forget()
         self.practice.reset()
         self.phase, self._explore_len = "probe", 0
-        evals = range(self.n_positions, self.n_positions + self.n_eval)  # fixed states, the car mostly moving
-        self._probe = VergenceRoleProbe(5, start=evals[0] if evals else -1)
+        # the first of the world's evaluation states: fixed, the car moving
+        self._probe = VergenceRoleProbe(5, start=self.n_positions if self.spec.n_starts > self.n_positions else -1)
         self._probe_first = True
         self.emit(EventOutput(EventKind.RELEARNING, "vergence policy relearned from scratch, then re-embedded", step))
 
@@ -767,11 +778,15 @@ class MountainCarProgram(Program):
         if probe is not None:
             self._probe = VergenceRoleProbe(5, start=int(probe.get("start", -1)))
             self._probe.restore(probe)
+        if (self.phase == "probe") != (self._probe is not None):
+            raise ValueError("a mountaincar state in phase probe needs its probe, and only then")
 
     def world_restarted(self) -> None:
         """Drop the pending vergence sample and restart the trace and episode in progress."""
         self.practice.reset()
         self._sweep.interrupted()
+        if self._probe is not None:
+            self._probe.interrupted()
         self._view = self._checking = None
         self._goal = None
         self._start_training_episode()
