@@ -250,7 +250,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         self._perf.clear()
         self._watching, self._held = False, 0
         self._accepted, self._best, self._checking = None, None, False
-        self._best_disparity, self._accepted_disparity = None, None
+        self._best_disparity = None
         self._accepted_traces, self._accepted_reached, self._candidate_traces = None, None, None
         self._relearn_unconfirmed, self._chance_seen = 0, False
         self._accepted_basis, self._sweep_rbf, self._sweep_basis = None, None, None

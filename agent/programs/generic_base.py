@@ -113,7 +113,6 @@ class GenericBase(Program):
     _accepted: np.ndarray | None
     _best: tuple[float, float] | None
     _best_disparity: float | None
-    _accepted_disparity: float | None  # the accepted sweep's end disparity, whatever the distance
     _checking: bool
     _sweep_w: np.ndarray | None
     _accepted_basis: dict[str, Any] | None

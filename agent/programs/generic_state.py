@@ -44,7 +44,6 @@ class GenericState(GenericRelearn):
             "accepted": None if self._accepted is None else self._accepted.copy(),
             "best": None if self._best is None else [self._best[0], min(self._best[1], 1e300)],
             "best_disparity": self._best_disparity,
-            "accepted_disparity": self._accepted_disparity,
             "held": self._held,
             "ends": [[int(k), v[0].tolist(), v[1].tolist()] for k, v in self._ends.items()],
             "trace_from": None if self._trace_from is None else self._trace_from.tolist(),
@@ -124,8 +123,6 @@ class GenericState(GenericRelearn):
         self._best = None if best is None else (float(best[0]), float(best[1]))
         bs = state.get("best_disparity")  # absent in older checkpoints
         self._best_disparity = None if bs is None else float(bs)
-        ad = state.get("accepted_disparity")  # absent in older checkpoints
-        self._accepted_disparity = None if ad is None else float(ad)
         self._held = int(state.get("held", 0))  # absent in older checkpoints
         self._ends = {
             int(k): (np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))

@@ -53,7 +53,6 @@ class GenericSweeps(GenericRelearn):
         self._accepted = None  # the accepted policy's weights (see the module docstring)
         self._best = None
         self._best_disparity = None  # planner, distance=net: the accepted sweep's end disparity
-        self._accepted_disparity = None  # the accepted sweep's end disparity (the net rule may come later)
         self._checking = False  # this sweep runs the accepted policy, not the newest one
         self._sweep_w = None  # the weights the sweep in progress follows
         self._accepted_basis = None  # lspi: the RBF basis the accepted weights are over
@@ -227,8 +226,9 @@ class GenericSweeps(GenericRelearn):
         if self._regauge:
             self._regauge = False
             if self._watching and self._accepted_traces and self._accepted_reached:
-                # the accepted policy's map under the distance now in force; ranked by its ends from here
-                self.phase, self._best_disparity, self._checking = "explore", self._accepted_disparity, True
+                # the accepted policy's map under the distance now in force (a newer policy is then
+                # ranked by its ends once one is accepted: `_best_disparity` is set at acceptance)
+                self.phase, self._best_disparity, self._checking = "explore", None, True
                 acc = (self._accepted_traces, self._accepted_reached)
                 self._embed(step, False, len(acc[0]) // self.spec.n_starts, of=acc)
                 self._checking = False
@@ -319,7 +319,6 @@ class GenericSweeps(GenericRelearn):
         if not self._checking and (better or not self._watching):
             self._accepted, self._best, self._held = np.array(self._sweep_w, copy=True), score, 0
             self._best_disparity = disparity if self._by_ends() else None
-            self._accepted_disparity = disparity
             self._accepted_traces = traces
             self._accepted_reached = [bool(r) for r in sw.reached]
             self._candidate_traces = None
