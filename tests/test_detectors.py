@@ -152,7 +152,7 @@ def test_the_cusum_of_failures_ignores_a_skewed_streams_tail_and_still_sees_a_ru
             fa[name] += sum(i < n for i in alarms)
             if name == "failures":
                 after = [i - n for i in alarms if i >= n]
-                assert after and after[0] <= 20, (seed, after)
+                assert after and after[0] <= 12, (seed, after)  # 4-9 episodes with these seeds
     assert fa["failures"] <= 2 and fa["failures"] * 10 < fa["z-score"], fa
 
 

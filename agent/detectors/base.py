@@ -201,6 +201,14 @@ class SummedDetector(ReferencedDetector):
         """The sum S (a drop when it exceeds the detector's threshold `h`)."""
         return self._s
 
+    def _crossed(self, h: float) -> bool:
+        """Whether S exceeds `h`: then a drop, and S and the reference start afresh."""
+        if self._s <= h:
+            return False
+        self._s = 0.0
+        self._ref.reset()
+        return True
+
     def state(self) -> dict[str, Any]:
         """The referenced detector's snapshot plus the sum S."""
         return {**super().state(), "s": self._s}

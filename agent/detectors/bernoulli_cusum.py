@@ -70,9 +70,7 @@ class BernoulliCUSUM(SummedDetector):
             if p1 > p0:  # else the reference fails so often that no rise is left to detect
                 step = math.log(p1 / p0) if failed else math.log((1.0 - p1) / (1.0 - p0))
                 self._s = max(0.0, self._s + step)
-            if self._s > self.h:
-                self._s = 0.0
-                ref.reset()
+            if self._crossed(self.h):
                 return True
         ref.push(failed)
         return False

@@ -39,9 +39,7 @@ class CUSUM(SummedDetector):
             ref.push(x)
             return False
         self._s = max(0.0, self._s - ref.z(x) - self.k)
-        if self._s > self.h:
-            self._s = 0.0
-            ref.reset()
+        if self._crossed(self.h):
             return True
         ref.push(x)
         return False
