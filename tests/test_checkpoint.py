@@ -185,7 +185,7 @@ CASES = {
         mountaincar,
         None,
         {"samples_per_iteration": 200, "eval_every": 40, "watch_after": 30, "report_after": 20},
-        lambda p: p.training_steps > 100 and p._goal is not None,
+        lambda p: p.training_steps > 100 and p.reading.goal is not None,
         1500,
         0,
     ),

@@ -214,12 +214,12 @@ def test_recalled_readings_give_the_same_run_in_fewer_world_steps_and_a_wrong_on
             run, _ = drive(w, prog, lambda p: len(p.curve) >= 2)
             runs[check] = (list(prog.curve), run.steps)
             if check:
-                assert prog._recalls > 0.5 * prog.training_steps  # most car steps recall their reading
-                wrong = {v: p + 1.0 for v, p in prog._recall.items()}  # every remembered reading wrong
-                prog._recall = dict(wrong)
+                assert prog.reading.recalls > 0.5 * prog.training_steps  # most car steps recall their reading
+                wrong = {v: p + 1.0 for v, p in prog.reading.recall.items()}  # every remembered reading wrong
+                prog.reading.recall = dict(wrong)
                 until = prog.training_steps + 400
                 drive(w, prog, lambda p, until=until: p.training_steps >= until)
-                assert not any(prog._recall.get(v) == p for v, p in wrong.items())  # a check differed: forgotten
+                assert not any(prog.reading.recall.get(v) == p for v, p in wrong.items())  # a check differed: forgotten
     assert runs[0][0] == runs[64][0]  # the same evaluations, step for step
     assert runs[64][1] < 0.7 * runs[0][1], runs  # in fewer world steps (most of the rest: learning to verge)
 
@@ -246,16 +246,16 @@ def test_a_reading_places_the_least_difference_between_vergence_steps(offset):
     around the true fixation) place it below one step: the equiangular fit recovers the offset, and
     the eyes first converge, then diverge twice, to see both sides."""
     w = MountainCarWorld(n_eval=2, seed=0)
-    prog = MountainCarProgram(w.spec(), seed=0)
+    r = MountainCarProgram(w.spec(), seed=0).reading
     g = 12
-    prog._goal, prog._k = g, g
-    prog._ds = {g: 3.0 * abs(offset)}
-    assert prog._look_aside() == 0  # converge to g + 1 first
-    prog._ds[g + 1], prog._k = 3.0 * abs(1 - offset), g + 1
-    assert prog._look_aside() == 1 and prog._k == g + 1  # then diverge toward g - 1
-    prog._ds[g - 1], prog._k = 3.0 * abs(-1 - offset), g - 1
-    assert prog._look_aside() is None
-    assert prog._substep() == pytest.approx(offset)
+    r.goal, r.k = g, g
+    r.ds = {g: 3.0 * abs(offset)}
+    assert r.look_aside() == 0  # converge to g + 1 first
+    r.ds[g + 1], r.k = 3.0 * abs(1 - offset), g + 1
+    assert r.look_aside() == 1 and r.k == g + 1  # then diverge toward g - 1
+    r.ds[g - 1], r.k = 3.0 * abs(-1 - offset), g - 1
+    assert r.look_aside() is None
+    assert r.substep() == pytest.approx(offset)
 
 
 def test_sub_step_positions_follow_the_true_angle_three_times_closer_than_whole_steps():
@@ -263,16 +263,16 @@ def test_sub_step_positions_follow_the_true_angle_three_times_closer_than_whole_
     put the fixation within about a tenth of a vergence step of the true angle along the track
     (whole steps: the quantisation's 0.29)."""
     w = MountainCarWorld(n_eval=2, seed=0)
-    prog = MountainCarProgram(w.spec(), seed=0)
+    r = MountainCarProgram(w.spec(), seed=0).reading
     whole, sub, truth = [], [], []
     with w:
         for x in np.linspace(-2.0, 1.85, 60):
             w.x = float(x)
             w.z = float(w.z_of(x))
             g = w.perceptual_goal()
-            prog._goal, prog._ds = g, dict(zip(range(g - 1, g + 2), w.differences(range(g - 1, g + 2)), strict=True))
+            r.goal, r.ds = g, dict(zip(range(g - 1, g + 2), w.differences(range(g - 1, g + 2)), strict=True))
             whole.append(g)
-            sub.append(g + prog._substep())
+            sub.append(g + r.substep())
             truth.append(float(w.true_angle(w.z)) / w.step_rad)
 
     def rms(est):

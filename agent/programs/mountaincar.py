@@ -31,83 +31,28 @@ embedding is put in the old one's coordinates by a similarity fit over the same 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from sensorimotor.agent.embedding import classical_mds, fit_similarity, trace_cross_distances, trace_distances
-from sensorimotor.agent.embedding.classical_mds import MDSModel
-from sensorimotor.agent.embedding.procrustes import SimilarityTransform
 from sensorimotor.agent.learners.kalman_velocity import VelocityFilter
 from sensorimotor.agent.learners.lspi import LSPI, RBFBasis
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.learners.window_velocity import WindowVelocity
 from sensorimotor.agent.programs.base import Decision, EmbeddingOutput, EventOutput, Program
+from sensorimotor.agent.programs.mountaincar_params import MountainCarProgramParams
 from sensorimotor.agent.programs.sweep import StartStateSweep
 from sensorimotor.agent.programs.vergence import VergencePractice, foveal_difference
+from sensorimotor.agent.programs.vergence_reading import VergenceReading
 from sensorimotor.agent.programs.vergence_roles import VergenceRoleProbe
 from sensorimotor.agent.snapshot import array_or_none
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation, Trigger, WorldSpec
-from sensorimotor.protocol.params import option, parse
+from sensorimotor.protocol.params import parse
 
-CONVERGE, DIVERGE, REVERSE = 0, 1, 2
-RECALL_SIZE = 100_000  # remembered readings at most (a world whose views never repeat adds no more)
+__all__ = ["MountainCarProgram", "MountainCarProgramParams"]
 
-
-@dataclass(frozen=True)
-class MountainCarProgramParams:
-    """Hyperparameters of the mountain-car program (ch. 8)."""
-
-    samples_per_iteration: int = option(400, "vergence samples between LSPI iterations", min=1)
-    epsilon: float = option(0.2, "vergence exploration: probability of a random action", min=0.0, max=1.0)
-    vergence_gamma: float = option(0.95, "LSPI discount of the vergence stage", min=0.0, max=1.0)
-    ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
-    max_trace: int = option(80, "longest vergence trace", min=2)
-    alpha: float = option(0.3, "Sarsa(lambda) step size", min=0.0)
-    gamma: float = option(0.99, "Sarsa(lambda) discount", min=0.0, max=1.0)
-    lam: float = option(0.9, "Sarsa(lambda) trace decay", min=0.0, max=1.0)
-    tiles: int = option(10, "tiles per dimension and tiling", min=1)
-    n_tilings: int = option(8, "tilings", min=1)
-    drive_epsilon: float = option(0.0, "driving exploration: probability of a random action", min=0.0, max=1.0)
-    eval_every: int = option(10_000, "training car steps between evaluations", min=1)
-    n_eval: int | None = option(None, "evaluation states used (none: all the world offers)", min=0)
-    watch_after: int = option(50_000, "training car steps before episodes report performance", min=0)
-    report_after: int = option(400, "car steps after which a trained driver gives up an episode", min=1)
-    process_var: float = option(
-        2e-4,
-        "process variance of the velocity Kalman filter, in squared vergence steps per car step (1e-5 "
-        "with substep=false reproduces the whole-step reading as it was)",
-        min=0.0,
-    )
-    velocity_range: float = option(
-        0.04,
-        "velocity the driver's tiles span either side of rest, in embedding spans per car step (0.04: the "
-        "car crosses its track in no fewer than ~25 steps)",
-        min=1e-6,
-    )
-    velocity: str = option(
-        "kalman",
-        "velocity estimate: kalman (a constant-velocity Kalman filter on the position) or window "
-        "(the least-squares slope of the last velocity_window + 1 positions)",
-        choices=("kalman", "window"),
-    )
-    velocity_window: int = option(8, "car steps the window velocity estimate spans", min=1)
-    policy_map: int = option(
-        0, "clusters of a policy map of the drive traces emitted after each evaluation (0: none; ch. 9.6)", min=0
-    )
-    substep: bool = option(
-        True,
-        "read the position below one vergence step: at the goal the eyes look one step either side, "
-        "and the foveal differences there place the minimum between steps (equiangular fit)",
-    )
-    recall_check: int = option(
-        64,
-        "a car step whose parallel-eye view was read before reuses that reading; every Nth reuse is "
-        "verged again, and a differing reading forgets them all (0: verge at every car step)",
-        min=0,
-    )
+REVERSE = 2  # the first drive action: the driver's actions are reverse, coast, forward
 
 
 class MountainCarProgram(Program):
@@ -171,28 +116,13 @@ class MountainCarProgram(Program):
         self.phase = "explore"
         self._explore_len = 0
         self._sweep = StartStateSweep(self.n_positions, max_trace)
-        # the embedding: landmark traces, MDS model, alignment to the first embedding
-        self.landmarks: list[list[int]] = []
-        self._model: MDSModel | None = None
-        self._align: SimilarityTransform | None = None
-        self._coords0: np.ndarray | None = None
-        self._positions: dict[tuple[int, ...], float] = {}
-        self._verge: dict[float, int] = {}  # the greedy vergence action per foveal difference, while LSPI is fixed
-        # the position each parallel-eye view led to, while LSPI and the embedding are fixed: the view
-        # depends only on where the car is, and the greedy trace from it only on the views it meets
-        self._recall: dict[bytes, float] = {}
-        self._recalls = 0  # reuses so far (every recall_check-th is verged again to check)
-        self._view: bytes | None = None  # the parallel-eye view of the reading in progress
-        self._checking: float | None = None  # the recalled position that reading is checking
-        self.quantum = 1.0
-        self._slope = 0.0  # embedding coordinate per vergence step (signed), to place a sub-step offset
         try:
-            self._k_max: int | None = int(spec.params["max_vergence"]) if "max_vergence" in spec.params else None
+            k_max = int(spec.params["max_vergence"]) if "max_vergence" in spec.params else None
         except ValueError as e:
             raise SpecMismatch(f"mountaincar spec param max_vergence must be an integer: {e}") from None
-        self._k = 0  # the eyes' vergence, in steps from parallel, during a reading
-        self._ds: dict[int, float] = {}  # foveal difference per vergence met in the reading in progress
-        self._goal: int | None = None  # the vergence the reading fixated at, while looking either side
+        #: the embedding and the reading of positions from it (sub-step, recalled readings)
+        self.reading = VergenceReading(k_max, prm.recall_check)
+        self._verge: dict[float, int] = {}  # the greedy vergence action per foveal difference, while LSPI is fixed
         # driving
         self.training_steps = 0
         self.episodes = 0
@@ -245,92 +175,41 @@ class MountainCarProgram(Program):
         return Decision(reset=True, start=-1)
 
     def _embed(self, step: int) -> None:
+        """Embed the sweep's traces and publish them; the first embedding makes the driver over its
+        span, a later one (after a drop) is put in the first one's coordinates."""
         traces = [list(t) for t in self._sweep.traces]
-        D = trace_distances(traces, kind="edit", substitution_cost=2)
-        mds = classical_mds(D, 1)
-        coords = mds.coordinates
-        relearned = self._coords0 is not None
-        if self._coords0 is not None:
-            # the same start states as the first embedding: keep the coordinates Sarsa learned in
-            self._align = fit_similarity(self._coords0, coords)
-            coords = self._align.apply(coords)
-        else:
-            self._align = None
-            self._coords0 = coords.copy()
-            lengths = [len(t) for t in traces]
-            span = float(coords.max() - coords.min())
-            self.quantum = span / max(max(lengths) - min(lengths), 1)  # one vergence step, in coordinates
+        coords, eigenvalues, first = self.reading.embed(traces)
+        if first:
             self._make_driver(float(coords.min()), float(coords.max()))
-        self.landmarks, self._model, self._positions, self._verge = traces, mds.model, {}, {}
-        ks = np.array([self._vergence_after(t) for t in traces], dtype=np.float64)
-        # the embedding is ~linear in the fixating vergence (Eq 7.3 over converge-only traces)
-        self._slope = float(np.polyfit(ks, coords[:, 0], 1)[0]) if np.ptp(ks) > 0 else 0.0
-        self._forget()
+        self._verge = {}
         n = len(traces)
         self.emit(
             EmbeddingOutput(
-                Trigger.RELEARNED if relearned else Trigger.POLICY_ITERATION,
+                Trigger.POLICY_ITERATION if first else Trigger.RELEARNED,
                 tuple(range(n)),
                 coords,
-                tuple(float(e) for e in mds.eigenvalues[: min(10, n)]),
+                eigenvalues,
                 step,
                 {
                     "lspi_iterations": float(self.lspi.iterations),
                     "mean_trace_length": float(np.mean([len(t) for t in traces])),
                 },
                 iteration=self.lspi.iterations,
-                drop_step=self.relearn_at if relearned else None,
+                drop_step=None if first else self.relearn_at,
             )
         )
 
     def position(self, trace: list[int]) -> float:
         """The agent's position: the embedding coordinate of a vergence trace (out of sample)."""
-        key = tuple(trace)
-        p = self._positions.get(key)
-        if p is None:
-            assert self._model is not None, "positions are read once the first embedding is made"
-            d = trace_cross_distances([list(trace)], self.landmarks, kind="edit", substitution_cost=2)
-            y = self._model.transform(d)
-            if self._align is not None:
-                y = self._align.apply(y)
-            p = self._positions[key] = float(y[0, 0])
-        return p
+        return self.reading.position(trace)
 
-    def _vergence_after(self, trace: list[int]) -> int:
-        """The eyes' vergence, in steps from parallel, after the actions of `trace`."""
-        k = 0
-        for a in trace:
-            k = k + 1 if a == CONVERGE else max(k - 1, 0)
-            if self._k_max is not None:
-                k = min(k, self._k_max)
-        return k
-
-    def _substep(self) -> float:
-        """Where between vergence steps the foveal difference is least, from the differences at the
-        fixated vergence and one step either side (equiangular fit of a V; in [-0.5, 0.5] steps,
-        positive toward converging). 0 when a side is out of the eyes' range."""
-        g = self._goal
-        assert g is not None, "a sub-step offset is read once the reading fixated"
-        dm, d0, dp = self._ds.get(g - 1), self._ds.get(g), self._ds.get(g + 1)
-        if dm is None or d0 is None or dp is None:
-            return 0.0
-        den = max(dm, dp) - d0
-        return float(np.clip(0.5 * (dm - dp) / den, -0.5, 0.5)) if den > 0 else 0.0
-
-    def _look_aside(self) -> int | None:
-        """The vergence action toward the next side of the goal not yet seen, or None when both are
-        seen (or out of the eyes' range)."""
-        g = self._goal
-        assert g is not None, "the eyes look aside once the reading fixated"
-        for k in (g + 1, g - 1):
-            if k >= 0 and (self._k_max is None or k <= self._k_max) and k not in self._ds:
-                return CONVERGE if k > self._k else DIVERGE
-        return None
+    @property
+    def landmarks(self) -> list[list[int]]:
+        """The sweep's vergence traces the embedding was made from."""
+        return self.reading.landmarks
 
     def _move_eyes(self, a: int) -> Decision:
-        self._k = self._k + 1 if a == CONVERGE else max(self._k - 1, 0)
-        if self._k_max is not None:
-            self._k = min(self._k, self._k_max)
+        self.reading.move(a)
         return Decision((float(a),))
 
     # stage 2: driving ----------------------------------------------------------------------------
@@ -354,8 +233,10 @@ class MountainCarProgram(Program):
         a tenth of a step's standard deviation, as measured along the track)."""
         if self.params.velocity == "window":
             return WindowVelocity(self.params.velocity_window)
-        r = self.quantum**2 / (100 if self.params.substep else 12)
-        return VelocityFilter(measurement_var=r, process_var=self.process_var * self.quantum**2)
+        q = self.reading.quantum
+        return VelocityFilter(
+            measurement_var=q**2 / (100 if self.params.substep else 12), process_var=self.process_var * q**2
+        )
 
     @property
     def evaluating(self) -> bool:
@@ -365,40 +246,10 @@ class MountainCarProgram(Program):
     def _start_training_episode(self) -> None:
         self._trace, self._last_drive, self._s, self._ep_steps, self._watching = None, False, None, 0, False
 
-    def _forget(self) -> None:
-        """Drop every remembered reading (the vergence policy, the embedding or the body changed)."""
-        self._recall, self._view, self._checking = {}, None, None
-
-    def _recalled(self, obs: Observation) -> float | None:
-        """At the parallel-eye view that begins a reading: the position this view led to before,
-        unless this reuse is one that is verged again to check it (or recall is off)."""
-        n = self.params.recall_check
-        self._view, self._checking = None, None
-        if not n:
-            return None
-        view = obs.tensors["left"].tobytes() + obs.tensors["right"].tobytes()
-        p = self._recall.get(view)
-        self._view = view
-        if p is None:
-            return None
-        self._recalls += 1
-        if self._recalls % n:
-            return p
-        self._checking = p
-        return None
-
-    def _remember(self, p: float) -> None:
-        """Keep the position the reading just finished gave for its first view; a check that
-        differs forgets every remembered reading (something changed that the views do not show)."""
-        if self._view is None:
-            return
-        if self._checking is not None and self._checking != p:
-            self._forget()
-        elif len(self._recall) < RECALL_SIZE:
-            self._recall[self._view] = p
-        self._view, self._checking = None, None
-
     def _drive(self, obs: Observation) -> Decision:
+        """A step of a car step: verge (greedy) from parallel eyes until the perceptual goal, look
+        either side (`substep`), read the position, and drive; or recall the reading of this view."""
+        r = self.reading
         if obs.t == 0:
             self._trace, self._s, self._ep_steps, self._last_drive = [], None, 0, False
         elif self._last_drive:
@@ -409,43 +260,43 @@ class MountainCarProgram(Program):
         if self._trace is None:
             self._trace = []
         if not self._trace:
-            self._k, self._ds, self._goal = 0, {}, None
-        if self._goal is not None and obs.done:  # not from this world (a vergence step never ends it)
-            self._goal = self._view = self._checking = None
+            r.begin()
+        if r.goal is not None and obs.done:  # not from this world (a vergence step never ends it)
+            r.abandon()
             return self._episode_over(obs)
-        if self._goal is not None:  # looking either side of the fixated vergence
-            self._ds[self._k] = foveal_difference(obs)
-            aside = self._look_aside()
+        if r.goal is not None:  # looking either side of the fixated vergence
+            r.ds[r.k] = foveal_difference(obs)
+            aside = r.look_aside()
             if aside is not None:
                 return self._move_eyes(aside)
         elif (
             not (obs.reward > 0 and self._trace) and len(self._trace) < self.max_trace and not (obs.t > 0 and obs.done)
         ):
             if not self._trace:
-                p = self._recalled(obs)
+                p = r.recalled(obs)
                 if p is not None:
                     self._trace = None
                     return self._car_step(p)
-            d = self._ds[self._k] = foveal_difference(obs)
+            d = r.ds[r.k] = foveal_difference(obs)
             a = self._verge.get(d)
             if a is None:
                 a = self._verge[d] = self.lspi.greedy(d)
             self._trace.append(a)
             return self._move_eyes(a)
         elif obs.done:  # the world ended the episode while we were reading (its car-step limit)
-            self._view = self._checking = None
+            r.view = r.checking = None
             return self._episode_over(obs)
         elif self.params.substep and obs.reward > 0:
-            self._goal = self._k
-            self._ds[self._k] = foveal_difference(obs)
-            aside = self._look_aside()
+            r.goal = r.k
+            r.ds[r.k] = foveal_difference(obs)
+            aside = r.look_aside()
             if aside is not None:
                 return self._move_eyes(aside)
-        p = self.position(self._trace)
-        if self._goal is not None:
-            p += self._substep() * self._slope
-            self._goal = None
-        self._remember(p)
+        p = r.position(self._trace)
+        if r.goal is not None:
+            p += r.substep() * r.slope
+            r.goal = None
+        r.remember(p)
         self._trace = None
         return self._car_step(p)
 
@@ -612,7 +463,7 @@ class MountainCarProgram(Program):
         self.relearn_at = step
         self.lspi.reset()
         self._verge = {}
-        self._forget()
+        self.reading.forget()
         self.practice.reset()
         self.phase, self._explore_len = "probe", 0
         # the first of the world's evaluation states: fixed, the car moving
@@ -634,36 +485,15 @@ class MountainCarProgram(Program):
                 "sarsa": self.sarsa.state(),
                 "filter": self._kf.state(),
             }
-        model = (
-            None if self._model is None else {"basis": self._model.basis.copy(), "mean_sq": self._model.mean_sq.copy()}
-        )
-        align = (
-            None
-            if self._align is None
-            else {
-                "scale": self._align.scale,
-                "rotation": self._align.rotation.copy(),
-                "translation": self._align.translation.copy(),
-            }
-        )
         return {
             **super().state(),
+            **self.reading.state(),
             "lspi": self.lspi.state(),
             "practice": self.practice.state(),
             "phase": self.phase,
             "explore_len": self._explore_len,
             "sweep": self._sweep.state(),
-            "landmarks": [list(t) for t in self.landmarks],
-            "model": model,
-            "align": align,
-            "coords0": array_or_none(self._coords0),
-            "positions": [[list(k), v] for k, v in self._positions.items()],
             "verge": [[d, a] for d, a in self._verge.items()],
-            "quantum": self.quantum,
-            "slope": self._slope,
-            "k": self._k,
-            "ds": [[k, d] for k, d in self._ds.items()],
-            "goal": self._goal,
             "training_steps": self.training_steps,
             "episodes": self.episodes,
             "driver": driver,
@@ -682,14 +512,6 @@ class MountainCarProgram(Program):
             "curve": [list(c) for c in self.curve],
             "episode_log": [list(e) for e in self.episode_log],
             "relearn_at": self.relearn_at,
-            # the remembered readings, so a restored program recalls (and checks) as this one would
-            "recall_views": np.array([np.frombuffer(v, dtype=np.uint8) for v in self._recall], dtype=np.uint8)
-            if self._recall
-            else None,
-            "recall_positions": [float(p) for p in self._recall.values()],
-            "recalls": self._recalls,
-            "view": None if self._view is None else np.frombuffer(self._view, dtype=np.uint8).copy(),
-            "checking": self._checking,
             "body": list(self.body),
             "probe": None if self._probe is None else self._probe.state(),
             "probe_first": self._probe_first,
@@ -704,29 +526,10 @@ class MountainCarProgram(Program):
         self.phase, self._explore_len = str(state["phase"]), int(state["explore_len"])
         self._sweep = StartStateSweep(self.n_positions, self.max_trace)
         self._sweep.restore(state["sweep"])
-        self.landmarks = [[int(a) for a in t] for t in state["landmarks"]]
-        m, al = state["model"], state["align"]
-        self._model = None if m is None else MDSModel(np.array(m["basis"]), np.array(m["mean_sq"]))
-        self._align = (
-            None
-            if al is None
-            else SimilarityTransform(float(al["scale"]), np.array(al["rotation"]), np.array(al["translation"]))
-        )
-        self._coords0 = array_or_none(state["coords0"])
-        self._positions = {tuple(int(a) for a in k): float(v) for k, v in state["positions"]}
+        trace = state["trace"]
+        self._trace = None if trace is None else [int(a) for a in trace]
+        self.reading.restore(state, self._trace)  # before the driver: its filter is in the reading's units
         self._verge = {float(d): int(a) for d, a in state["verge"]}
-        self._forget()
-        self.quantum = float(state["quantum"])
-        if "slope" in state:
-            self._slope = float(state["slope"])
-        else:  # a checkpoint from before the sub-step reading: the slope from its landmarks
-            self._slope = 0.0
-            if self._model is not None and self.landmarks:
-                ks = np.array([self._vergence_after(t) for t in self.landmarks], dtype=np.float64)
-                ys = np.array([self.position(t) for t in self.landmarks])
-                self._slope = float(np.polyfit(ks, ys, 1)[0]) if np.ptp(ks) > 0 else 0.0
-        self._ds = {int(k): float(d) for k, d in state.get("ds", [])}
-        self._goal = None if state.get("goal") is None else int(state["goal"])
         self.training_steps, self.episodes = int(state["training_steps"]), int(state["episodes"])
         driver = state["driver"]
         if driver is None:
@@ -742,9 +545,6 @@ class MountainCarProgram(Program):
             self.sarsa.restore(driver["sarsa"])
             self._kf = self._filter()
             self._kf.restore(driver["filter"])
-        trace = state["trace"]
-        self._trace = None if trace is None else [int(a) for a in trace]
-        self._k = int(state["k"]) if "k" in state else self._vergence_after(self._trace or [])
         self._last_drive, self._s = bool(state["last_drive"]), array_or_none(state["s"])
         self._a, self._ep_steps, self._watching = int(state["a"]), int(state["ep_steps"]), bool(state["watching"])
         self._perf = None if state["perf"] is None else float(state["perf"])
@@ -756,19 +556,6 @@ class MountainCarProgram(Program):
         self.curve = [(int(n), float(m)) for n, m in state["curve"]]
         self.episode_log = [(int(n), int(k)) for n, k in state["episode_log"]]
         self.relearn_at = None if state["relearn_at"] is None else int(state["relearn_at"])
-        views = state.get("recall_views")
-        self._recall = (
-            {}
-            if views is None
-            else {
-                np.asarray(v, dtype=np.uint8).tobytes(): float(p)
-                for v, p in zip(views, state["recall_positions"], strict=True)
-            }
-        )
-        self._recalls = int(state.get("recalls", 0))
-        view = state.get("view")
-        self._view = None if view is None else np.asarray(view, dtype=np.uint8).tobytes()
-        self._checking = None if state.get("checking") is None else float(state["checking"])
         body = tuple(int(a) for a in state.get("body", range(5)))
         if sorted(body) != list(range(5)):
             raise ValueError(f"saved body actions {body} are not an order of the 5 actions")
@@ -787,6 +574,5 @@ class MountainCarProgram(Program):
         self._sweep.interrupted()
         if self._probe is not None:
             self._probe.interrupted()
-        self._view = self._checking = None
-        self._goal = None
+        self.reading.abandon()
         self._start_training_episode()

@@ -22,7 +22,10 @@ from typing import Any
 CATEGORIES: dict[str, tuple[tuple[str, str], ...]] = {
     "rendering (PyBullet; the world's perceptual-goal search included)": (("worlds/vergence.py", "render"),),
     "vergence policy": (("agent/programs/vergence.py", "foveal_difference"), ("agent/learners/lspi.py", "greedy")),
-    "embedding lookup": (("agent/programs/mountaincar.py", "position"), ("agent/programs/mountaincar.py", "_recalled")),
+    "embedding lookup": (
+        ("agent/programs/vergence_reading.py", "position"),
+        ("agent/programs/vergence_reading.py", "recalled"),
+    ),
     "learner (Sarsa, velocity filter)": (
         ("agent/learners/sarsa_lambda.py", "act"),
         ("agent/learners/sarsa_lambda.py", "greedy"),

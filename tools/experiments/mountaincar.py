@@ -363,9 +363,10 @@ def _ablated_program(world: Any, swap: str, seed: int, eval_every: int, **params
 
     class Ablated(MountainCarProgram):
         def _make_driver(self, lo: float, hi: float) -> None:
-            assert self._coords0 is not None
+            coords0 = self.reading.coords0
+            assert coords0 is not None
             xs = world.starts[: self.n_positions, 0]
-            self.map_a, self.map_b = (float(c) for c in np.polyfit(xs, self._coords0[:, 0], 1))
+            self.map_a, self.map_b = (float(c) for c in np.polyfit(xs, coords0[:, 0], 1))
             super()._make_driver(lo, hi)
             if swap == "tiles":
                 prm, a, b = world.car, self.map_a, self.map_b
