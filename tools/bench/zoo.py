@@ -89,10 +89,14 @@ ZOO: tuple[ZooWorld, ...] = (
         "FrozenLake 4x4 slippery, plain estimator", "gym:FrozenLake-v1", {}, {"estimator": "plain"}, 60_000, 20_000
     ),
     ZooWorld("CliffWalking", "gym:CliffWalking-v1", {}, {}, 50_000, 10_000),
+    # Gymnasium's own defaults of the 8x8 lake (slippery) and a slippery cliff: tried as a new user would
+    ZooWorld("FrozenLake 8x8 slippery", "gym:FrozenLake-v1", {"map_name": "8x8"}, {}, 100_000, 30_000),
+    ZooWorld("CliffWalking slippery", "gym:CliffWalking-v1", {"is_slippery": "true"}, {}, 100_000, 30_000),
     ZooWorld("MiniGrid Empty 8x8", "gym:MiniGrid-Empty-8x8-v0", {}, {}, 60_000, 20_000, "minigrid"),
     ZooWorld("MiniGrid Empty 16x16", "gym:MiniGrid-Empty-16x16-v0", {}, {}, 100_000, 30_000, "minigrid"),
     ZooWorld("MiniGrid LavaGap S7", "gym:MiniGrid-LavaGapS7-v0", {}, {}, 100_000, 30_000, "minigrid"),
     ZooWorld("MiniGrid SimpleCrossing S9N1", "gym:MiniGrid-SimpleCrossingS9N1-v0", {}, {}, 100_000, 30_000, "minigrid"),
+    ZooWorld("MiniGrid FourRooms", "gym:MiniGrid-FourRooms-v0", {}, {}, 100_000, 30_000, "minigrid"),
     ZooWorld("MountainCar", "gym:MountainCar-v0", {}, {}, 100_000, 30_000),
     ZooWorld("MountainCarContinuous", "gym:MountainCarContinuous-v0", {}, {}, 100_000, 30_000),
     ZooWorld("MountainCarContinuous, DTW", "gym:MountainCarContinuous-v0", {}, {"distance": "dtw"}, 100_000, 30_000),

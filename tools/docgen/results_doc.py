@@ -277,7 +277,7 @@ SOURCES: dict[str, Source] = {
         ),
     ),
     "zoo-defaults": Source(
-        "sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world MiniGrid",
+        'sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world "CliffWalking slippery" --world MiniGrid',
         "results/bench-zoo-defaults/runs.jsonl",
         jsonl_table(
             (
@@ -300,7 +300,7 @@ SOURCES: dict[str, Source] = {
         ),
     ),
     "zoo-defaults-short": Source(
-        "sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world MiniGrid",
+        'sme bench zoo --defaults --seeds 3 --json --world FrozenLake --world CliffWalking --world "CliffWalking slippery" --world MiniGrid',
         "results/bench-zoo-defaults/runs.jsonl",
         jsonl_table(
             (
