@@ -178,3 +178,26 @@ def test_a_goal_missed_once_is_run_again_before_it_counts_as_a_drop():
     assert all(e.metrics["goal_reached_fraction"] == 1.0 for e in late)
     _, blind, _ = _jitter_run(doubt=False)  # without the second run the same world reads as a drop
     assert blind.events(EventKind.DROP_DETECTED)
+
+
+def test_a_check_sweep_that_repeats_the_last_published_traces_publishes_nothing():
+    """A watched policy is swept again (a check) when a newer one is worse or outcomes alternate. A
+    world that changed under it gives other traces, whose map is published once; the same traces
+    again are no new map (MiniGrid's Dynamic-Obstacles published one map seven times in a row)."""
+    world = GridWorld("g", seed=0, size=7)
+    program = make_program(replace(world.spec(), program="generic"), 0)
+    run_inprocess(world, program, 20_000, stop_when=lambda r: program._watching and program.phase == "explore")
+    assert program._watching and program._accepted_traces is not None
+    changed = [list(t) for t in program._accepted_traces]
+    changed[0] = changed[0] + [changed[0][-1]]  # one start's way is longer now (still at the goal)
+    published = []
+    for _ in range(3):
+        program._checking, program.phase = True, "embed"
+        program._sweep.traces, program._sweep.reached = [list(t) for t in changed], list(program._accepted_reached)
+        program._pending_embedding = None
+        program.background.discard("embed")
+        program._swept(0)
+        published.append(program._pending_embedding is not None)
+    assert published == [True, False, False], published
+    # the accepted policy and its traces are unchanged: a check does not accept
+    assert program._accepted_traces != changed and not program._checking

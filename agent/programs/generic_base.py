@@ -121,6 +121,7 @@ class GenericBase(Program):
     _accepted_traces: list[list[int]] | None
     _accepted_reached: list[bool] | None
     _candidate_traces: list[list[int]] | None
+    _published: list[list[int]] | None
     _relearn_unconfirmed: int
     _diverged: bool
     _unfed: list[float]

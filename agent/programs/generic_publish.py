@@ -45,6 +45,7 @@ class GenericPublish(GenericRelearn):
         (the trigger will say so, with the drop's step)."""
         traces, flags = of if of is not None else (self._sweep.traces, self._sweep.reached)
         traces = [list(t) for t in traces]
+        self._published = traces
         rot = self._find_rotations(step)
         n = len(traces) // k
         per_start = [traces[i * k : (i + 1) * k] for i in range(n)]

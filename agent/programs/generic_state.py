@@ -57,6 +57,7 @@ class GenericState(GenericRelearn):
             "accepted_reached": self._accepted_reached,
             "unfed": list(self._unfed),
             "candidate_traces": None if self._candidate_traces is None else [list(t) for t in self._candidate_traces],
+            "published": None if self._published is None else [list(t) for t in self._published],
             "start_scores": list(self._start_scores),
             "start_fair": self._start_fair,
             "rotations": None
@@ -149,6 +150,8 @@ class GenericState(GenericRelearn):
         self._unfed = [float(v) for v in state.get("unfed", [])]
         ct = state.get("candidate_traces")
         self._candidate_traces = None if ct is None else [[int(a) for a in t] for t in ct]
+        pt = state.get("published")  # absent in older checkpoints
+        self._published = None if pt is None else [[int(a) for a in t] for t in pt]
         self._start_scores = [float(v) for v in state.get("start_scores", [])]
         self._start_fair = bool(state.get("start_fair", True))
         rot = state.get("rotations")

@@ -61,6 +61,7 @@ class GenericSweeps(GenericRelearn):
         self._accepted_traces = None  # the accepted policy's last sweep
         self._accepted_reached = None  # and which of its traces reached the goal
         self._candidate_traces = None  # a better policy's traces, not yet confirmed
+        self._published = None  # the traces of the last map published (a version is a new map)
         self._relearn_unconfirmed = 0  # good sweeps since a drop whose traces the next one did not keep
         self._diverged = False  # the trace in progress left the accepted policy's choices
         self._unfed = []  # trace scores of this sweep held back from the detector
@@ -311,6 +312,11 @@ class GenericSweeps(GenericRelearn):
         relearned = good and self.relearn_at is not None
         if self._watching and same and not relearned:
             # the accepted policy's own traces again: the published map stands (a version is a new map)
+            self._checking = False
+            return None
+        if self._checking and not relearned and traces == self._published:
+            # the accepted policy checked again, with the traces of the map last published (a world
+            # that changed under it, noticed or not): that map stands
             self._checking = False
             return None
         if relearned:
