@@ -100,6 +100,8 @@ class GenericPublish(GenericRelearn):
         p = self._pending_embedding
         assert p is not None
         self._pending_embedding = None
+        if p.get("repeat"):
+            return
         n, step = int(p["n"]), int(p["step"])
         eig = np.asarray(result["eigenvalues"])
         keys = (

@@ -314,11 +314,9 @@ class GenericSweeps(GenericRelearn):
             # the accepted policy's own traces again: the published map stands (a version is a new map)
             self._checking = False
             return None
-        if self._checking and not relearned and traces == self._published:
-            # the accepted policy checked again, with the traces of the map last published (a world
-            # that changed under it, noticed or not): that map stands
-            self._checking = False
-            return None
+        # the accepted policy checked again with the traces of the map last published (a world that
+        # changed under it, noticed or not): that map stands, and the repeat is not emitted
+        repeat = self._checking and not relearned and traces == self._published
         if relearned:
             self._relearn_unconfirmed = 0
             self._order_kept()
@@ -331,6 +329,8 @@ class GenericSweeps(GenericRelearn):
             self._accepted_basis = None if self.learner != "lspi" else self._sweep_basis
         self._watching = self._watching or good
         self._embed(step, relearned, k)
+        if repeat and self._pending_embedding is not None:
+            self._pending_embedding["repeat"] = True
         self._checking = False
         return None
 
