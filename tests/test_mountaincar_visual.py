@@ -195,6 +195,8 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
     before = [m for s, m in prog.curve if s < at["morph"]]
     assert len(before) == 2 and before[-1] < 0.3 * random_agent(0, 10), curve  # it learned to drive by 20k steps
     assert [e.values["steps_to_goal"] for e in run.events("evaluation")] == pytest.approx(curve)
+    last = prog.evaluation_steps  # the last evaluation, state by state, in the world's order
+    assert len(last) == prog.n_eval and np.mean(last) == pytest.approx(curve[-1]) and max(last) <= 1000
     assert drops and drops[0] > at["morph"], (drops, at)  # no false alarm while it learned
     assert drops[0] - at["morph"] <= 5000, (drops, at)  # 4267 with this seed: about a dozen failing episodes
     relearned = run.embeddings[-1]

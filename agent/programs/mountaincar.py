@@ -239,6 +239,12 @@ class MountainCarProgram(Program):
         )
 
     @property
+    def evaluation_steps(self) -> tuple[int, ...]:
+        """Car steps to the goal from each evaluation state, in the world's order: the evaluation in
+        progress so far, or the last one (the cap where the goal was not reached)."""
+        return tuple(self._eval_steps)
+
+    @property
     def evaluating(self) -> bool:
         """Whether learning is halted for an evaluation run."""
         return self.phase == "evaluate"

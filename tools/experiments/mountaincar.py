@@ -25,6 +25,7 @@ class DriveResult:
     morph_at: int | None = None  # training steps when the body changed
     world_steps: int = 0
     seconds: float = 0.0
+    per_state: list[list[int]] = field(default_factory=list)  # car steps from each evaluation state, per evaluation
 
 
 def visual(
@@ -66,6 +67,8 @@ def visual(
             )
         elif getattr(msg, "kind", None) == "drop_detected":
             res.drops.append(prog.training_steps)
+        elif getattr(msg, "kind", None) == "evaluation":
+            res.per_state.append(list(prog.evaluation_steps))
 
     def perturb(k: int) -> Control | None:
         if morph and morph_at is not None and not state["morphed"] and prog.training_steps >= morph_at:
@@ -147,21 +150,29 @@ def true_state(
     while len(res.curve) < train_steps // eval_every:
         n += true_state_episode(agent, rng, prm, max_car_steps)
         if n // eval_every > len(res.curve):
-            res.curve.append((n, steps_to_goal(agent.greedy, evals, max_car_steps)))
+            per = steps_from_each(agent.greedy, evals, max_car_steps)
+            res.curve.append((n, float(np.mean(per))))
+            res.per_state.append(per)
     return res
 
 
-def steps_to_goal(policy, states: np.ndarray, cap: int = 1000) -> float:
-    """Mean car steps to the goal from each (x, v) in `states` under `policy(s) -> 0|1|2`."""
+def steps_from_each(policy, states: np.ndarray, cap: int = 1000) -> list[int]:
+    """Car steps to the goal from each (x, v) in `states` under `policy(s) -> 0|1|2` (`cap` when
+    the goal is not reached)."""
     prm = MountainCarParams()
-    total = 0
+    steps = []
     for x, v in states:
         for t in range(1, cap + 1):  # noqa: B007 (t counts the steps taken, read after the loop)
             x, v, done = car_step(float(x), float(v), policy(np.array([x, v])) - 1, prm)
             if done:
                 break
-        total += t
-    return total / len(states)
+        steps.append(t)
+    return steps
+
+
+def steps_to_goal(policy, states: np.ndarray, cap: int = 1000) -> float:
+    """Mean car steps to the goal from each (x, v) in `states` under `policy(s) -> 0|1|2`."""
+    return float(np.mean(steps_from_each(policy, states, cap)))
 
 
 def random_agent(seed: int, n_eval: int = 100, cap: int = 1000) -> float:
