@@ -163,7 +163,7 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
     from sensorimotor.agent.detectors import make_detector
 
     w = MountainCarWorld(n_eval=10, seed=1)
-    prog = MountainCarProgram(w.spec(), seed=1, eval_every=10_000, watch_after=12_000)
+    prog = MountainCarProgram(w.spec(), seed=1, eval_every=10_000, watch_after=15_000)
     at = {"morph": None}
     drops: list[int] = []
 
@@ -198,7 +198,7 @@ def test_staged_program_learns_to_drive_then_detects_a_wider_baseline_and_re_emb
     last = prog.evaluation_steps  # the last evaluation, state by state, in the world's order
     assert len(last) == prog.n_eval and np.mean(last) == pytest.approx(curve[-1]) and max(last) <= 1000
     assert drops and drops[0] > at["morph"], (drops, at)  # no false alarm while it learned
-    assert drops[0] - at["morph"] <= 5000, (drops, at)  # 4267 with this seed: about a dozen failing episodes
+    assert drops[0] - at["morph"] <= 5000, (drops, at)  # 1986 with this seed: a handful of failing episodes
     relearned = run.embeddings[-1]
     assert relearned.trigger == Trigger.RELEARNED and relearned.procrustes_error < 0.01  # the new body's angles
 

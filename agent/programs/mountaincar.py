@@ -9,7 +9,7 @@ places any new trace without re-embedding: that coordinate is the agent's positi
 Stage 2, driving: every car step starts with the eyes parallel; the agent verges (greedy), reads its
 position from the trace (refined below one vergence step by the foveal differences one step either
 side of the fixation, `substep`), a constant-velocity Kalman filter (filterpy) over that position gives
-velocity (`velocity=window`: the slope of the last positions instead), and Sarsa(lambda) with tile coding (alpha 0.3, gamma 0.99, lambda 0.9) picks reverse,
+velocity (`velocity=window`: the slope of the last positions instead), and Sarsa(lambda) with tile coding (alpha 0.3, undiscounted, lambda 0.9) picks reverse,
 coast or forward (reward -1 per car step). Every `eval_every` training car steps, learning halts
 and the greedy policy is run from the world's fixed evaluation states: the mean steps to goal is
 published as an `evaluation` event (the learning curve).

@@ -18,7 +18,13 @@ class MountainCarProgramParams:
     ridge: float = option(1e-3, "LSPI ridge regulariser", min=0.0)
     max_trace: int = option(80, "longest vergence trace", min=2)
     alpha: float = option(0.3, "Sarsa(lambda) step size", min=0.0)
-    gamma: float = option(0.99, "Sarsa(lambda) discount", min=0.0, max=1.0)
+    gamma: float = option(
+        1.0,
+        "Sarsa(lambda) discount (1: undiscounted, as the task is episodic and every step costs the same; "
+        "the dissertation's 0.99 caps what never arriving costs at about 100 steps)",
+        min=0.0,
+        max=1.0,
+    )
     lam: float = option(0.9, "Sarsa(lambda) trace decay", min=0.0, max=1.0)
     tiles: int = option(10, "tiles per dimension and tiling", min=1)
     n_tilings: int = option(8, "tilings", min=1)

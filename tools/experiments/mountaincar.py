@@ -10,11 +10,15 @@ from typing import Any
 import numpy as np
 
 from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
+from sensorimotor.agent.programs.mountaincar_params import MountainCarProgramParams
 from sensorimotor.protocol.messages import Trigger
 from sensorimotor.tools.experiments import scoring
 from sensorimotor.tools.experiments.shared import ci95, fmt, mean_se, plot, pool_map
 from sensorimotor.worlds.mountaincar_dynamics import MountainCarParams, evaluation_states, random_state
 from sensorimotor.worlds.mountaincar_dynamics import step as car_step
+
+#: the embedding agent's driver settings, which the true-state agent shares so the two compare
+_DRIVER = MountainCarProgramParams()
 
 
 @dataclass
@@ -96,13 +100,14 @@ def visual(
 def true_state_agent(
     seed: int,
     prm: MountainCarParams,
-    tiles: int = 10,
-    n_tilings: int = 8,
-    alpha: float = 0.3,
-    gamma: float = 0.99,
-    lam: float = 0.9,
+    tiles: int = _DRIVER.tiles,
+    n_tilings: int = _DRIVER.n_tilings,
+    alpha: float = _DRIVER.alpha,
+    gamma: float = _DRIVER.gamma,
+    lam: float = _DRIVER.lam,
 ) -> SarsaLambda:
-    """Sarsa(lambda) over a tile coding of the true (x, v): the agent given the state (ch. 8)."""
+    """Sarsa(lambda) over a tile coding of the true (x, v): the agent given the state (ch. 8),
+    with the embedding agent's own driver settings by default."""
     coder = TileCoder(
         np.array([prm.x_min, -prm.v_max]), np.array([prm.x_max, prm.v_max]), tiles=tiles, n_tilings=n_tilings
     )
@@ -132,11 +137,11 @@ def true_state(
     train_steps: int,
     eval_every: int = 10_000,
     n_eval: int = 100,
-    tiles: int = 10,
-    n_tilings: int = 8,
-    alpha: float = 0.3,
-    gamma: float = 0.99,
-    lam: float = 0.9,
+    tiles: int = _DRIVER.tiles,
+    n_tilings: int = _DRIVER.n_tilings,
+    alpha: float = _DRIVER.alpha,
+    gamma: float = _DRIVER.gamma,
+    lam: float = _DRIVER.lam,
     max_car_steps: int = 1000,
 ) -> DriveResult:
     """The same Sarsa(lambda) and tile coding, given the true position and velocity."""
