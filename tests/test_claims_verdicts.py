@@ -60,7 +60,30 @@ def test_paired_rows_in_chapter9_and_the_mountain_car_bodies():
         "welch_p": {"baseline-1.0 vs baseline-1.4": 0.5},
     }
     body = [r for r in report.rows_mountaincar(mc, quick=False) if r.measure.startswith("bodies")]
-    assert body[0].measure.endswith("paired t-test (same seeds)") and body[0].verdict == report.MET
+    assert body[0].measure.endswith("(paired equivalence, same seeds)") and body[0].verdict == report.MET
+
+
+def test_bodies_are_judged_the_same_by_equivalence_not_by_a_missing_difference():
+    """Fig 8.4's "the same on every body": a small, consistent difference is the same within the
+    bound (though significant); a large one is not; nor are runs too noisy to tell."""
+    base = np.array([100.0, 104.0, 98.0, 110.0, 101.0, 99.0, 103.0, 107.0, 100.0, 102.0])
+    jitter = np.array([1.0, -1.0, 0.5, -0.5, 1.5, -1.5, 0.0, 1.0, -1.0, 0.0])
+
+    def row(other: np.ndarray) -> report.Row:
+        finals = {"baseline-1.0": base.tolist(), "vertical": other.tolist()}
+        finals |= {"true": [90.0] * 10, "baseline-1.4": base.tolist(), "random": [900.0] * 10}
+        mc = {
+            "ci95": {k: list(report.ci95(v)) for k, v in finals.items()},
+            "finals": finals,
+            "welch_p": {"baseline-1.0 vs vertical": 0.5},
+        }
+        return next(r for r in report.rows_mountaincar(mc, quick=False) if r.measure.startswith("bodies"))
+
+    close = row(base * 1.05 + jitter)  # 5 % slower on every seed: significant, and the same within 1.2x
+    assert close.verdict == report.MET and "significant" in close.why
+    assert row(base * 1.4 + jitter).verdict == report.NOT_MET  # 40 % slower
+    noisy = row(base * np.array([0.6, 1.6, 0.7, 1.5, 0.6, 1.7, 0.8, 1.4, 0.6, 1.5]))
+    assert noisy.verdict == report.NOT_MET  # no difference shown, and no sameness either
 
 
 def _table_5_1_results(seeds: int = 3) -> list[dict]:
@@ -205,3 +228,31 @@ def test_lesion_summary_rises_shifts_and_frozen_share():
         and s["robust"]["rise"] == [2.0, 2.0]
     )
     assert s["basic"]["frozen_weight"] == [0.3, 0.3] and s["robust"]["landing_shift_u"] == [-1.25, -1.25]
+
+
+def test_faithful_lesion_row_is_not_comparable_only_when_the_premise_does_not_hold():
+    """Fig 4.4's separation is asked of a lesion only when the basic rule's estimates mostly lie above
+    the best activation it leaves (4.4.2's premise); a separation shown is met whatever the premise."""
+    ar = {"best_before": 422.0, "best_after": 364.0, "centre_after": 263.0}
+
+    def verdict(frozen: float, robust_rise: list[float]) -> str:
+        basic_rise = [150.0, 160.0, 155.0, 148.0, 158.0]
+        ls = {
+            rule: {
+                "rise": rise,
+                "last_before": [100.0] * 5,
+                "end": [300.0] * 5,
+                "frozen_weight": [frozen] * 5,
+                "arithmetic": ar,
+            }
+            for rule, rise in (("basic", basic_rise), ("robust", robust_rise))
+        }
+        res = {"learning": [], "lesion": [], "reversal": [], "lesion_summary": ls}
+        rows = report.rows_retina(res, quick=False)
+        return next(r for r in rows if r.measure.startswith("lesion (Fig 4.4)")).verdict
+
+    close = [151.0, 158.0, 157.0, 150.0, 157.0]  # no consistent difference per seed
+    apart = [250.0, 270.0, 255.0, 260.0, 265.0]
+    assert verdict(0.18, close) == report.NOT_COMPARABLE  # both rules learn: the question is not posed
+    assert verdict(0.9, close) == report.NOT_MET  # the premise holds and the separation is missing
+    assert verdict(0.18, apart) == report.MET and verdict(0.9, apart) == report.MET

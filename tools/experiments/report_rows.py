@@ -71,6 +71,11 @@ def rows_gridworld(res: dict[str, Any], quick: bool) -> list[Row]:
     return out
 
 
+#: Fig 4.4 (4.4.2): the share of the basic rule's steering weight whose reward estimate R_k must lie
+#: above the best activation a lesion leaves for the dissertation's separation to be asked of a run
+PREMISE = 0.5
+
+
 def rows_retina(res: dict[str, Any], quick: bool) -> list[Row]:
     learning, lesion, reversal = res["learning"], res["lesion"], res["reversal"]
     steps = learning[0]["steps"][-1] if learning and learning[0]["steps"] else 0
@@ -96,12 +101,23 @@ def rows_retina(res: dict[str, Any], quick: bool) -> list[Row]:
             f"{gap_end:+.1f}, of which {gap_before:+.1f} was there before the lesion"
         )
         ar = ls["basic"].get("arithmetic")
+        frozen = ls["basic"].get("frozen_weight") or []
         if ar:
             why += (
                 f". The lesion lowers the best activation from {ar['best_before']:.0f} to {ar['best_after']:.0f} "
                 f"(target on the centre: {ar['centre_after']:.0f}); the basic rule updates a field only when R > R_k, "
-                f"and at the lesion {100 * float(np.mean(ls['basic']['frozen_weight'])):.0f} % of its steering weight "
+                f"and at the lesion {100 * float(np.mean(frozen)):.0f} % of its steering weight "
                 "had R_k above that best: the rest still learns (docs/reproduce.md, Fig 4.4)"
+            )
+        if v == NOT_MET and frozen and float(np.mean(frozen)) < PREMISE:
+            # 4.4.2's separation follows from the basic rule freezing: with most of its steering weight
+            # still below the best activation left, this lesion does not pose the dissertation's question
+            v = NOT_COMPARABLE
+            why = (
+                "4.4.2's premise does not hold after this lesion: the basic rule stops only where R_k is above "
+                f"the best activation left, {100 * float(np.mean(frozen)):.0f} % of its steering weight (the "
+                f"premise: most of it, over {100 * PREMISE:.0f} %), so both rules go on learning; the claim is "
+                "judged where the premise holds, in the next row. " + why
             )
         out.append(
             Row(
@@ -338,6 +354,52 @@ def _ratio_ci(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, flo
     return r, r * (1 - rel), r * (1 + rel)
 
 
+#: the chapter's bound for "comparable": the embedding agent within 1.2x of the true-state agent, and
+#: two bodies within 1.2x of each other
+BOUND = 1.2
+
+
+def _bodies_row(pair: str, welch_p: float, a: Sequence[float], b: Sequence[float]) -> Row:
+    """Fig 8.4, "performance is the same across all morphologies": with the same seeds, judged by
+    equivalence (two one-sided paired t-tests on the per-seed log ratio, margin `BOUND`: met when
+    the 90 % interval of the ratio lies within 1/BOUND-BOUND), the paired t-test's p beside it; a
+    p > 0.05 alone would also pass two bodies that differ, whenever the runs are noisy enough."""
+    from scipy import stats
+
+    if len(a) == len(b) > 1:
+        d = np.log(np.asarray(a, dtype=np.float64) / np.asarray(b, dtype=np.float64))
+        n, m = len(d), float(np.mean(d))
+        se = float(np.std(d, ddof=1)) / np.sqrt(n)
+        t = float(stats.t.ppf(0.95, n - 1))
+        lo, hi = float(np.exp(m - t * se)), float(np.exp(m + t * se))
+        margin = float(np.log(BOUND))
+        p_tost = (
+            max(float(stats.t.sf((m + margin) / se, n - 1)), float(stats.t.sf((margin - m) / se, n - 1)))
+            if se > 0
+            else (0.0 if abs(m) < margin else 1.0)
+        )
+        p = paired(a, b, "two-sided").p_t
+        same = 1 / BOUND <= lo and hi <= BOUND
+        return Row(
+            f"bodies {pair}: the same within {BOUND}x (paired equivalence, same seeds)",
+            f"ratio {np.exp(m):.3f} (90 % CI {lo:.3f}-{hi:.3f})",
+            "the same on every body; differences not statistically significant (Fig 8.4)",
+            MET if same else NOT_MET,
+            f"equivalence within {BOUND}x either way: two one-sided paired t-tests over {n} seeds on the "
+            f"per-seed ratio, p = {p_tost:.3g} (met: the 90 % interval inside {1 / BOUND:.3f}-{BOUND}); "
+            f"the difference itself: paired t p = {p:.3f}"
+            + (" (significant: the dissertation's own wording would not allow it)" if p < 0.05 else ""),
+        )
+    comparable = welch_p == welch_p  # NaN with one run
+    return Row(
+        f"bodies {pair}: Welch t-test",
+        "n/a" if not comparable else f"p = {welch_p:.3f}",
+        "no significant difference",
+        (MET if welch_p > 0.05 else NOT_MET) if comparable else NOT_COMPARABLE,
+        "p > 0.05: no significant difference" if comparable else "one run per body: no test",
+    )
+
+
 def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
     from scipy import stats
 
@@ -371,19 +433,7 @@ def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
         )
     for pair, p in res["welch_p"].items():
         a, _, b = pair.partition(" vs ")
-        test = "Welch t-test"
-        if len(finals.get(a, [])) == len(finals.get(b, [])) > 1:  # the same seeds: a paired test
-            p, test = paired(finals[a], finals[b], "two-sided").p_t, "paired t-test (same seeds)"
-        comparable = p == p  # NaN with one run
-        out.append(
-            Row(
-                f"bodies {pair}: {test}",
-                "n/a" if not comparable else f"p = {p:.3f}",
-                "no significant difference",
-                (MET if p > 0.05 else NOT_MET) if comparable else NOT_COMPARABLE,
-                "p > 0.05: no significant difference" if comparable else "one run per body: no test",
-            )
-        )
+        out.append(_bodies_row(pair, p, finals.get(a, []), finals.get(b, [])))
     out.append(
         Row(
             "random agent: steps to goal",
