@@ -408,10 +408,10 @@ def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
     out = []
     for k in ("baseline-1.0", "baseline-1.4", "vertical"):
         r = ci[k][0] / ci["true"][0]
-        why = f"{r:.2f}x the true-state agent (met: within 1.2x)"
+        why = f"{r:.2f}x the true-state agent (met: within {BOUND}x)"
         if len(finals.get(k, [])) > 1 and len(finals.get("true", [])) > 1:
             r, lo, hi = _ratio_ci(finals[k], finals["true"])
-            over = f"; {r - 1.2:.2f}x above the bound" if r > 1.2 else ""
+            over = f"; {r - BOUND:.2f}x above the bound" if r > BOUND else ""
             same = len(finals[k]) == len(finals["true"])  # the same seeds: a paired test
             p = (
                 paired(finals[k], finals["true"], "two-sided").p_t
@@ -419,7 +419,7 @@ def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
                 else float(stats.ttest_ind(finals[k], finals["true"], equal_var=False).pvalue)
             )
             why = (
-                f"{r:.2f}x the true-state agent, 95 % CI of the ratio {lo:.2f}-{hi:.2f} (met: within 1.2x){over}; "
+                f"{r:.2f}x the true-state agent, 95 % CI of the ratio {lo:.2f}-{hi:.2f} (met: within {BOUND}x){over}; "
                 f"{'paired t' if same else 'Welch'} p vs the true-state agent {p:.3f}"
             )
         out.append(
@@ -427,7 +427,7 @@ def rows_mountaincar(res: dict[str, Any], quick: bool) -> list[Row]:
                 f"{k}: steps to goal at the end",
                 f"{fmt(ci[k], 1)} ({r:.2f}x true state {fmt(ci['true'], 1)})",
                 "comparable to the agent given true position and velocity",
-                MET if r <= 1.2 else NOT_MET,
+                MET if r <= BOUND else NOT_MET,
                 why + _quick(quick, "20000 training car steps, one evaluation", "100000 car steps (full run)"),
             )
         )
