@@ -248,13 +248,14 @@ with Bus(BusConfig.for_role("agent", ep)) as r, Bus(BusConfig.for_role("tool", e
         q.watch_alive(keys.ALL_CLAIMS, lambda k, alive: seen.add(k), history=True)
         assert wait_for(lambda: len(seen) == 300, 20)
         answers = []
-        for _ in range(3):  # an empty answer is zenoh's (see the next test); a hang is the fault
+        for _ in range(3):  # an empty or partial answer is zenoh's (see the next test; a partial one is
+            # the query's 2 s timeout on a loaded machine); a hang is the fault
             got = []
             t = threading.Thread(target=lambda: got.append(len(q.alive(keys.ALL_CLAIMS, timeout=2.0))), daemon=True)
             t.start()
             t.join(15)
             answers.append(got[0] if got else "hung")
-            if answers[-1] != 0:
+            if answers[-1] in (300, "hung"):
                 break
         print(answers[-1], answers, flush=True)
         import os
