@@ -1,11 +1,13 @@
 """The rules by which the generic program fits box actions to a body (`agent.programs.box_moves`):
-net moves where the moves add up, half moves where the body follows them more faithfully."""
+net moves where the moves add up, half moves where the body follows them more faithfully, and each
+move axis's gain where the body carries its axes out unevenly."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from sensorimotor.agent.programs.box_moves import (
+    axis_gains,
     move_scale,
     moves_add_up,
     probe_half_moves,
@@ -98,3 +100,44 @@ def _exact_steps(scale: float, seed: int, n: int) -> tuple[np.ndarray, np.ndarra
 def test_spill_needs_enough_rows():
     m = TABLE[:5]
     assert spill(m, m, 0.05 * m) is None
+
+
+def _hand_sweep(gains: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A sweep of a hand whose axes carry out a move at `gains` x 0.05: starts on a 4 x 4 x 4
+    lattice, each trace's summed moves bring it into a goal region of radius 0.05 round 0 (the
+    moves' units are whole steps). Returns (starts, net moves, displacements)."""
+    rng = np.random.default_rng(seed)
+    axis = np.linspace(-0.15, 0.15, 4)
+    starts = np.array([[x, y, z] for x in axis for y in axis for z in axis])
+    stop = rng.uniform(-0.03, 0.03, size=starts.shape)  # where in the goal region it stopped
+    nets = np.rint((stop - starts) / (0.05 * gains))
+    return starts, nets, 0.05 * gains * nets
+
+
+def test_axis_gains_put_a_net_move_in_the_units_the_body_senses():
+    from scipy.spatial import procrustes
+
+    uneven = np.array([0.7, 1.0, 1.0])  # one axis carried out at 70 % of the others' gain
+    for seed in (0, 1, 2):
+        starts, nets, moved = _hand_sweep(uneven, seed)
+        gains = axis_gains(nets, moved)
+        assert gains is not None
+        assert np.allclose(gains, uneven / uneven.mean(), atol=0.02), gains
+        before = procrustes(starts, nets)[2]
+        after = procrustes(starts, nets * gains)[2]
+        floor = procrustes(starts, moved)[2]  # the sensed displacements themselves: where each trace stopped
+        assert after < 0.7 * before and after < 1.1 * floor, (before, after, floor)  # the stretch is mended
+    starts, nets, moved = _hand_sweep(np.ones(3), 0)
+    even = axis_gains(nets, moved)
+    assert even is not None and np.allclose(even, 1.0, atol=0.02)
+
+
+def test_axis_gains_refuse_what_is_not_one_gain_per_axis():
+    starts, nets, moved = _hand_sweep(np.array([0.7, 1.0, 1.0]), 0)
+    turn = np.array([[np.cos(0.6), np.sin(0.6), 0.0], [-np.sin(0.6), np.cos(0.6), 0.0], [0.0, 0.0, 1.0]])
+    assert axis_gains(nets, moved @ turn) is None  # the sensed axes are not the move axes
+    assert axis_gains(nets, -moved) is None  # a gain that is not positive
+    rng = np.random.default_rng(0)
+    assert axis_gains(nets, rng.normal(size=moved.shape)) is None  # moves that do not add up
+    assert axis_gains(nets, moved[:, :2]) is None  # not one displacement per move axis
+    assert axis_gains(nets[:3], moved[:3]) is None  # too few traces to tell

@@ -140,6 +140,10 @@ def test_net_distance_compares_where_box_traces_add_up_to_not_their_order():
     assert d[0, 1] < 1e-6 and abs(d[0, 2] - np.linalg.norm(table[6] - table[2])) < 1e-6
     padded = embed_job([a, b, c], table, 2)
     assert np.linalg.norm(padded["coordinates"][0] - padded["coordinates"][1]) > 0.1
+    # the move axes' gains (`box_moves.axis_gains`) scale the net moves before their distances
+    scaled = embed_job([a, b, c], table, 2, distance="net", gains=[0.5, 1.5])
+    d = np.linalg.norm(scaled["coordinates"][:, None] - scaled["coordinates"][None], axis=2)
+    assert abs(d[0, 2] - np.linalg.norm((table[6] - table[2]) * [0.5, 1.5])) < 1e-6
 
 
 def test_the_generic_program_saves_and_restores_its_planner():

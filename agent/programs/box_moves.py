@@ -25,6 +25,14 @@ are compared by their net move (`distance=auto`), and how large a move the plann
   it finds a coefficient on the move before; the map's error, uncorrelated with the moves, does not
   bias it. A whole move spills when that coefficient's size is over `SPILLS` of the move's own;
   the plan takes half moves when theirs spills at most `LESS` as much.
+* **Axes the body carries out unevenly.** A net move counts moves sent, so an axis the body carries
+  out at two thirds of another's gain (panda-gym's hand, across the table) stretches the map along
+  it. Where the program plans over the observation itself and it has one value per move axis, the
+  sweep's displacements tell each axis's gain: `axis_gains` fits them as linear in the net moves,
+  and when each axis's displacement follows its own axis's moves (the other axes' terms under
+  `CROSS` of its own) the net moves are scaled by those gains, so the map is in the units the body
+  senses. Motor coordinates of camera frames are in the units of the moves sent by construction:
+  a gain fitted there would measure the map's error, not the body, so they keep the moves' units.
 """
 
 from __future__ import annotations
@@ -41,6 +49,8 @@ BETTER = 0.1
 SPILLS = 0.2
 #: over camera frames: half moves are taken when they spill at most this share of a whole move's spill
 LESS = 0.75
+#: `axis_gains`: an axis's gain is its own when the other axes' terms in its fit are under this share of it
+CROSS = 0.2
 
 
 def unexplained(moves: np.ndarray, displacements: np.ndarray) -> float | None:
@@ -90,6 +100,26 @@ def moves_add_up(nets: np.ndarray, displacements: np.ndarray) -> bool | None:
     return None if share is None else share <= 1.0 - ADDS_UP
 
 
+def axis_gains(nets: np.ndarray, displacements: np.ndarray) -> np.ndarray | None:
+    """Each move axis's gain, relative to their mean: the least-squares fit of the displacements
+    (end less start, one column per move axis, in the units the body senses) on the net moves with
+    a constant; None when the displacements are not one value per axis, the moves do not add up
+    (`moves_add_up`), an axis's displacement leans on another axis's moves (an off-diagonal term
+    over `CROSS` of its diagonal one), or a gain is not positive."""
+    m = np.asarray(nets, dtype=np.float64)
+    d = np.asarray(displacements, dtype=np.float64)
+    if m.ndim != 2 or d.shape != m.shape or not moves_add_up(m, d):
+        return None
+    w = np.linalg.lstsq(np.hstack([m, np.ones((len(m), 1))]), d, rcond=None)[0][: m.shape[1]]
+    gains = np.diag(w).copy()
+    if np.any(gains <= 1e-12):
+        return None
+    cross = np.abs(w - np.diag(gains)).max(axis=0)  # column k: the other axes' moves in axis k's fit
+    if np.any(cross > CROSS * gains):
+        return None
+    return gains / gains.mean()
+
+
 def probe_half_moves(whole_share: float | None) -> bool:
     """Whether the warm-up goes on with half moves: a whole move was carried out unfaithfully."""
     return whole_share is not None and whole_share > UNFAITHFUL
@@ -106,9 +136,11 @@ def move_scale(whole_share: float | None, half_share: float | None) -> float:
 __all__ = [
     "ADDS_UP",
     "BETTER",
+    "CROSS",
     "LESS",
     "SPILLS",
     "UNFAITHFUL",
+    "axis_gains",
     "move_scale",
     "moves_add_up",
     "probe_half_moves",

@@ -129,6 +129,8 @@ class GenericBase(Program):
     _start_fair: bool
     _trace_from: np.ndarray | None
     _ends: dict[int, tuple[np.ndarray, np.ndarray]]
+    #: the move axes' gains of the last sweep embedded (`box_moves.axis_gains`; None: the moves' units)
+    _gains: np.ndarray | None = None
     _pending_embedding: dict[str, Any] | None
     _last_choice: int
     retried_total: int
@@ -389,6 +391,9 @@ class GenericBase(Program):
         raise NotImplementedError
 
     def moves_state(self) -> dict[str, Any]:  # generic_continuous
+        raise NotImplementedError
+
+    def _axis_gains(self) -> np.ndarray | None:  # generic_continuous
         raise NotImplementedError
 
     def restore_moves(self, state: dict[str, Any] | None) -> None:  # generic_continuous

@@ -19,6 +19,7 @@ from sensorimotor.agent.learners.sarsa_lambda import SarsaLambda, TileCoder
 from sensorimotor.agent.programs.base import Decision, EventOutput
 from sensorimotor.agent.programs.box_moves import (
     SPILLS,
+    axis_gains,
     move_scale,
     moves_add_up,
     probe_half_moves,
@@ -374,6 +375,7 @@ class GenericContinuous(GenericBase):
             "probe": probe,
             "probe_prev": prev,
             "probe_whole": self._probe_whole,
+            "gains": None if self._gains is None else self._gains.tolist(),
         }
 
     def restore_moves(self, state: dict[str, Any] | None) -> None:
@@ -383,6 +385,8 @@ class GenericContinuous(GenericBase):
         if self.planner is not None and not isinstance(self.planner, ReachLearner):
             self._set_scale(float(state["scale"]), seed=0)  # the planner's rng comes with its state
         self._distance, self._distance_now = state["distance"], str(state["distance_now"])
+        gains = state.get("gains")
+        self._gains = None if gains is None else np.asarray(gains, dtype=np.float64)
         if "probe" in state:
             probe, prev = state["probe"], state["probe_prev"]
 
@@ -397,6 +401,30 @@ class GenericContinuous(GenericBase):
             self._probe_prev = None if prev is None else row(prev)
             self._probe_whole = None if state["probe_whole"] is None else float(state["probe_whole"])
 
+    def _sweep_moves(self) -> tuple[np.ndarray, np.ndarray]:
+        """The sweep's net moves (each trace's summed moves) and displacements (its end less its
+        start, in the coordinates planned in), a row per start whose trace ended."""
+        traces, k = self._sweep.traces, max(1, self._sweep.repeats)
+        rows = [(i, v) for i, v in sorted(self._ends.items()) if (i + 1) * k <= len(traces)]
+        nets = np.array(
+            [self.actions[np.asarray(traces[(i + 1) * k - 1], dtype=np.int64)].sum(axis=0) for i, _ in rows]
+        ).reshape(len(rows), -1)
+        return nets, np.array([v[1] - v[0] for _, v in rows]).reshape(len(rows), -1)
+
+    def _axis_gains(self) -> np.ndarray | None:
+        """The move axes' gains over this sweep (`box_moves.axis_gains`), where the planner plans over
+        the observation itself, in its units (not motor coordinates of frames, which are in the
+        moves' units by construction); None elsewhere, where the fit does not hold, or with
+        `axis_gains=off`."""
+        if self.params.axis_gains == "off" or self.discrete or self.motor or not self._ends:
+            return None
+        if not isinstance(self.planner, ModelPlanner):
+            return None
+        nets, moved = self._sweep_moves()
+        if moved.shape[1] != nets.shape[1]:
+            return None
+        return axis_gains(nets, moved * np.asarray(self._span, dtype=np.float64))
+
     def _trace_distance(self, step: int | None = None) -> str:
         """The distance between box traces in force: `distance` when named; `auto`: the net move
         when a planner's sweep shows that the moves add up (`box_moves.moves_add_up`, on each
@@ -409,12 +437,7 @@ class GenericContinuous(GenericBase):
             return self._distance or self._distance_now
         if self.discrete or self.learner != "planner" or not self._ends:
             return self._distance or "padded"
-        traces, k = self._sweep.traces, max(1, self._sweep.repeats)
-        rows = [(i, v) for i, v in sorted(self._ends.items()) if (i + 1) * k <= len(traces)]
-        nets = np.array(
-            [self.actions[np.asarray(traces[(i + 1) * k - 1], dtype=np.int64)].sum(axis=0) for i, _ in rows]
-        ).reshape(len(rows), -1)
-        moved = np.array([v[1] - v[0] for _, v in rows]).reshape(len(rows), -1)
+        nets, moved = self._sweep_moves()
         adds = moves_add_up(nets, moved)
         if self._distance == "padded":
             # settled on a sweep whose ends were not linear in the moves, which over camera frames

@@ -83,6 +83,7 @@ def embed_job(
     reached: list[list[bool]] | None = None,
     discrete_distance: str = "edit",
     embedding: str = "classical",
+    gains: list[float] | None = None,
 ) -> dict[str, Any]:
     """Trace distances and classical MDS of each start's sampled traces (one sample each in a
     deterministic world): edit distance of discrete actions (in the start's frame when `rotations`,
@@ -93,7 +94,8 @@ def embed_job(
     traces of one sample a start (`discrete_distance=auto`) or `moves`: the distance between their
     action counts, turns left out (`move_counts`). Then classical MDS, or weighted MDS from it
     (`embedding=weighted`; `auto`: where the moves distance was used; the eigenvalues are classical
-    MDS's either way). A pure function, run off the act path."""
+    MDS's either way). Net moves are scaled by the move axes' `gains` when given
+    (`box_moves.axis_gains`). A pure function, run off the act path."""
     symbols = n_actions
     if rotations is not None and actions is None:
         rot = Rotations(int(rotations[0]), tuple((int(a), int(p)) for a, p in rotations[1]))
@@ -124,6 +126,8 @@ def embed_job(
                 D = trace_distances(cont, kind="dtw", dtw_penalty=dtw_penalty)
             elif distance == "net":  # the order of the moves does not count, only where they add up to
                 net = np.array([c.sum(axis=0) for c in cont])
+                if gains is not None:
+                    net = net * np.asarray(gains, dtype=np.float64)
                 D = np.linalg.norm(net[:, None, :] - net[None, :, :], axis=2)
             else:
                 D = trace_distances(cont, kind="continuous")

@@ -135,6 +135,14 @@ class GenericProgramParams:
         "agent.programs.box_moves), else padded",
         choices=("auto", "padded", "dtw", "net"),
     )
+    axis_gains: str = option(
+        "auto",
+        "net moves: auto scales each move axis by the gain the sweep's displacements show, where the "
+        "planner plans over the observation itself with one value per move axis and each axis follows "
+        "its own moves (agent.programs.box_moves.axis_gains), so the map is in the units the body "
+        "senses; off keeps the moves' units",
+        choices=("auto", "off"),
+    )
     discrete_distance: str = option(
         "auto",
         "discrete actions: edit distance between traces (Algorithm 1), or moves: the distance between how "

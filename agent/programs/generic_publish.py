@@ -51,6 +51,9 @@ class GenericPublish(GenericRelearn):
         per_start = [traces[i * k : (i + 1) * k] for i in range(n)]
         assert self.background is not None
         prm = self.params
+        distance = self._trace_distance()
+        if of is None and self.planner is not None:
+            self._gains = self._axis_gains()  # a republished map keeps the gains its sweep measured
         self.background.submit(
             "embed",
             embed_job,
@@ -59,7 +62,8 @@ class GenericPublish(GenericRelearn):
             actions=None if self.discrete or self.learner == "reach" else self.actions.copy(),
             dims=self.dims,
             estimator=self.estimator,
-            distance=self._trace_distance(),
+            distance=distance,
+            gains=None if distance != "net" or self._gains is None else self._gains.tolist(),
             dtw_penalty=prm.dtw_penalty,
             rotations=None if rot is None else (rot.order, [list(p) for p in rot.powers]),
             n_actions=self.n_actions,
