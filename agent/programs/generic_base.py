@@ -393,7 +393,7 @@ class GenericBase(Program):
     def moves_state(self) -> dict[str, Any]:  # generic_continuous
         raise NotImplementedError
 
-    def _axis_gains(self) -> np.ndarray | None:  # generic_continuous
+    def _measure_gains(self, step: int, distance: str) -> None:  # generic_continuous
         raise NotImplementedError
 
     def restore_moves(self, state: dict[str, Any] | None) -> None:  # generic_continuous

@@ -411,19 +411,35 @@ class GenericContinuous(GenericBase):
         ).reshape(len(rows), -1)
         return nets, np.array([v[1] - v[0] for _, v in rows]).reshape(len(rows), -1)
 
-    def _axis_gains(self) -> np.ndarray | None:
-        """The move axes' gains over this sweep (`box_moves.axis_gains`), where the planner plans over
-        the observation itself, in its units (not motor coordinates of frames, which are in the
-        moves' units by construction); None elsewhere, where the fit does not hold, or with
-        `axis_gains=off`."""
+    def _measure_gains(self, step: int, distance: str) -> None:
+        """The move axes' gains over the sweep about to be embedded (`box_moves.axis_gains`), where
+        the planner plans over the observation itself, in its units (not motor coordinates of frames,
+        which are in the moves' units by construction); None elsewhere, where the fit does not hold,
+        or with `axis_gains=off`. Said in an event when first measured under net moves, or when one
+        moved by over 0.1."""
+        before, self._gains = self._gains, None
         if self.params.axis_gains == "off" or self.discrete or self.motor or not self._ends:
-            return None
+            return
         if not isinstance(self.planner, ModelPlanner):
-            return None
+            return
         nets, moved = self._sweep_moves()
-        if moved.shape[1] != nets.shape[1]:
-            return None
-        return axis_gains(nets, moved * np.asarray(self._span, dtype=np.float64))
+        if moved.shape[1] == nets.shape[1]:
+            self._gains = axis_gains(nets, moved * self._span)
+        if distance != "net" or self._gains is None:
+            return
+        if before is not None and float(np.abs(self._gains - before).max()) <= 0.1:
+            return
+        gains = ", ".join(f"{g:.2f}" for g in self._gains)
+        self.emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"each move axis's gain over this sweep, relative to their mean: {gains}: the net moves are "
+                "scaled by them (the map in the units the body senses)",
+                step,
+                reason="axis_gains",
+                values={f"gain_{i}": float(g) for i, g in enumerate(self._gains)},
+            )
+        )
 
     def _trace_distance(self, step: int | None = None) -> str:
         """The distance between box traces in force: `distance` when named; `auto`: the net move

@@ -53,23 +53,7 @@ class GenericPublish(GenericRelearn):
         prm = self.params
         distance = self._trace_distance()
         if of is None and self.planner is not None:
-            before, self._gains = self._gains, self._axis_gains()  # a republished map keeps its sweep's
-            if (
-                distance == "net"
-                and self._gains is not None
-                and (before is None or float(np.abs(self._gains - before).max()) > 0.1)
-            ):
-                gains = ", ".join(f"{g:.2f}" for g in self._gains)
-                self.emit(
-                    EventOutput(
-                        EventKind.POLICY_ITERATION,
-                        f"each move axis's gain over this sweep, relative to their mean: {gains}: the net moves are "
-                        "scaled by them (the map in the units the body senses)",
-                        step,
-                        reason="axis_gains",
-                        values={f"gain_{i}": float(g) for i, g in enumerate(self._gains)},
-                    )
-                )
+            self._measure_gains(step, distance)  # a republished map keeps its own sweep's gains
         self.background.submit(
             "embed",
             embed_job,
