@@ -208,7 +208,9 @@ def test_over_the_bus_a_refused_control_is_reported_and_the_world_stays_up(procs
         assert wait_for(lambda: world_events(WorldEventKind.CONTROL_APPLIED), 30), events
         applied = world_events(WorldEventKind.CONTROL_APPLIED)[0]
         assert "sd 0.01" in applied.detail
-        assert applied.step > steps  # the first observation of the changed body
+        # `steps` counts the observations learned (0 .. steps-1), so the first the changed body
+        # can give is observation `steps`: the control may reach the world before that one is made
+        assert applied.step >= steps
     assert wait_for(lambda: link(status(endpoint), "r7").steps > steps + 20, 30)
     assert world.poll() is None and agent.poll() is None
 
