@@ -127,6 +127,12 @@ def test_axis_gains_put_a_net_move_in_the_units_the_body_senses():
         after = procrustes(starts, nets * gains)[2]
         floor = procrustes(starts, moved)[2]  # the sensed displacements themselves: where each trace stopped
         assert after < 0.7 * before and after < 1.1 * floor, (before, after, floor)  # the stretch is mended
+    # a reversed motor: the axis runs against its moves, and has the magnitude of its gain
+    starts, nets, moved = _hand_sweep(uneven, 0)
+    flipped = moved * np.array([-1.0, 1.0, 1.0])
+    gains = axis_gains(nets, flipped)
+    assert gains is not None and np.allclose(gains, uneven / uneven.mean(), atol=0.02), gains
+    assert procrustes(starts, nets * gains)[2] < 0.7 * procrustes(starts, nets)[2]
     starts, nets, moved = _hand_sweep(np.ones(3), 0)
     even = axis_gains(nets, moved)
     assert even is not None and np.allclose(even, 1.0, atol=0.02)
@@ -136,7 +142,9 @@ def test_axis_gains_refuse_what_is_not_one_gain_per_axis():
     starts, nets, moved = _hand_sweep(np.array([0.7, 1.0, 1.0]), 0)
     turn = np.array([[np.cos(0.6), np.sin(0.6), 0.0], [-np.sin(0.6), np.cos(0.6), 0.0], [0.0, 0.0, 1.0]])
     assert axis_gains(nets, moved @ turn) is None  # the sensed axes are not the move axes
-    assert axis_gains(nets, -moved) is None  # a gain that is not positive
+    still = moved.copy()
+    still[:, 0] = 0.0
+    assert axis_gains(nets, still) is None  # an axis that does not move
     rng = np.random.default_rng(0)
     assert axis_gains(nets, rng.normal(size=moved.shape)) is None  # moves that do not add up
     assert axis_gains(nets, moved[:, :2]) is None  # not one displacement per move axis

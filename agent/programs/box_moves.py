@@ -105,16 +105,18 @@ def axis_gains(nets: np.ndarray, displacements: np.ndarray) -> np.ndarray | None
     (end less start, one column per move axis, in the units the body senses) on the net moves with
     a constant; None when the displacements are not one value per axis, the moves do not add up
     (`moves_add_up`), an axis's displacement leans on another axis's moves (an off-diagonal term
-    over `CROSS` of its diagonal one), or a gain is not positive."""
+    over `CROSS` of its diagonal one), or an axis does not move. An axis that runs against its moves
+    (a reversed motor) has the magnitude of its gain: the map differs by a reflection, which
+    Procrustes and every distance ignore."""
     m = np.asarray(nets, dtype=np.float64)
     d = np.asarray(displacements, dtype=np.float64)
     if m.ndim != 2 or d.shape != m.shape or not moves_add_up(m, d):
         return None
     w = np.linalg.lstsq(np.hstack([m, np.ones((len(m), 1))]), d, rcond=None)[0][: m.shape[1]]
-    gains = np.diag(w).copy()
+    gains = np.abs(np.diag(w))
     if np.any(gains <= 1e-12):
         return None
-    cross = np.abs(w - np.diag(gains)).max(axis=0)  # column k: the other axes' moves in axis k's fit
+    cross = np.abs(w - np.diag(np.diag(w))).max(axis=0)  # column k: the other axes' moves in axis k's fit
     if np.any(cross > CROSS * gains):
         return None
     return gains / gains.mean()
