@@ -170,6 +170,36 @@ def test_net_moves_of_a_body_with_uneven_axes_are_scaled_by_each_axis_gain():
     assert finals["auto"] < 0.6 * finals["off"], finals
 
 
+def test_a_start_the_warm_up_never_met_is_taken_into_the_planners_grid():
+    """A world whose first episodes all start at one home pose: the warm-up meets one start, and
+    the grid laid over its walk leaves the far starts off it, where every trace fails. The first
+    such start met is taken in (a `grid` event), the plan starts afresh, and every start is reached.
+    Measured, seed 0: 0.004 from all 16 starts; without it, 0.97 from 5 of them."""
+    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
+    resets = [0]
+
+    def home_first(env, p):
+        resets[0] += 1
+        return _place(env, (0.86, 0.86) if resets[0] <= 4 else p)  # the warm-up's episodes
+
+    gym.register(
+        "planner-test/HomeFirstPointMass-v0",
+        entry_point=lambda: EmbeddableEnv(PointMass(), lattice, home_first, np.array(lattice)),
+        max_episode_steps=100,
+    )
+    try:
+        with make_world("gym:planner-test/HomeFirstPointMass-v0", "home", 0) as w:
+            program = make_program(w.spec(), 0, embed_every=1500, sarsa_warmup=300)
+            run = run_inprocess(w, program, 7_500)
+    finally:
+        del gym.envs.registry["planner-test/HomeFirstPointMass-v0"]
+    said = [e for e in run.events("policy_iteration") if e.reason == "grid"]
+    assert said and min(said[0].values.values()) < 0.0, [e.detail for e in run.events("policy_iteration")]
+    assert all(e.step < run.embeddings[0].step for e in said)  # before the first sweep only
+    last = run.embeddings[-1]
+    assert last.metrics["goal_reached_fraction"] == 1.0 and last.procrustes_error < 0.02, last.procrustes_error
+
+
 def test_net_distance_compares_where_box_traces_add_up_to_not_their_order():
     from sensorimotor.agent.programs.generic import embed_job
 

@@ -33,6 +33,10 @@ from sensorimotor.agent.programs.goal import failed, reached
 from sensorimotor.protocol.errors import SpecMismatch
 from sensorimotor.protocol.messages import EventKind, Observation
 
+#: a start nearer the planner's grid edge than this share of it (the grid spans the starts met with
+#: half their span on either side: a quarter of that margin) is not held, and the grid is laid again
+HOLD = 0.125
+
 
 class GenericContinuous(GenericBase):
     """Sarsa(lambda) and the model planner: warm-ups, ranges, learning steps."""
@@ -333,6 +337,7 @@ class GenericContinuous(GenericBase):
         assert self.planner is not None
         if obs.t == 0:
             self._prev_x, self._prev = None, None
+            self._hold_start(obs)
         terminal = obs.t > 0 and self._terminal(obs)
         a = None if terminal or obs.done else self.planner.act(self._vector(obs))
         if self._prev_x is not None and self._prev is not None and obs.t > 0 and self._prev_key is not None:
@@ -348,6 +353,37 @@ class GenericContinuous(GenericBase):
         if obs.done or a is None:
             return Decision(reset=True, start=-1)
         return Decision(tuple(float(v) for v in self.actions[a]))
+
+    def _hold_start(self, obs: Observation) -> None:
+        """A start at or past the planner's grid edge (`HOLD`: the warm-up met too few starts to
+        span them, in a world of long episodes or by chance) leaves its traces no room: they run
+        off the grid, where every state is planned as the edge, and fail. Before the first sweep,
+        the grid is laid again over the starts met with this one, the plan starts afresh, and an
+        event (`grid`) says so; later, the accepted map's ends are in the grid's units, and the
+        sweeps have met every start."""
+        if not isinstance(self.planner, ModelPlanner) or self.lspi.iterations > 0:
+            return
+        x = self._motor_map(self._raw(obs)) if self._motor_map is not None else self._flat(obs)
+        v = (x - self._lo) / self._span
+        if np.all((v >= HOLD) & (v <= 1.0 - HOLD)):
+            return
+        self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
+        self._set_ranges()
+        assert self.background is not None
+        self.background.discard("plan")
+        self.planner = self._new_planner(self.planner.dims)
+        self._fresh, self._since_plan, self.new_samples = False, 0, 0
+        where = ", ".join(f"{u:.2f}" for u in v)
+        self.emit(
+            EventOutput(
+                EventKind.POLICY_ITERATION,
+                f"a start at ({where}) of the planner's grid lies at or past its edge (the warm-up met too few "
+                "starts to span them): the grid is laid again over the starts met and the plan starts afresh",
+                obs.step,
+                reason="grid",
+                values={f"start_{i}": float(u) for i, u in enumerate(v)},
+            )
+        )
 
     def _set_scale(self, scale: float, seed: int | None = None) -> None:
         """The plan's moves span `scale` of each bound: a new action table and a new planner (the
