@@ -69,7 +69,8 @@ def test_hundred_worlds_attach_vanish_and_are_released_memory_bounded(procs, end
     print(f"100 worlds in {took:.1f} s; agent RSS {before / MB:.1f} MB -> {after / MB:.1f} MB")
     assert after <= before + 50 * MB, (before / MB, after / MB)
     assert wait_for(lambda: len(list(state.glob("c*.ckpt.npz"))) == 100, 30), sorted(state.glob("c*.ckpt.npz"))
-    assert log.has("checkpointed to") and log.has("released")
+    # the status may say so before the agent's log line is read
+    assert wait_for(lambda: log.has("checkpointed to") and log.has("released"), 10), log.lines[-5:]
 
     # a released world that returns is restored from its checkpoint through the normal attach path
     helper("churn", "--connect", endpoint, "--n", "1", "--batch", "1", "--prefix", "c", timeout=60)
@@ -83,7 +84,7 @@ def test_without_state_dir_a_released_world_starts_fresh_and_says_so(procs, endp
     assert wait_for(lambda: agent_status(endpoint) is not None, 60)
     helper("churn", "--connect", endpoint, "--n", "1", "--batch", "1", "--prefix", "f", timeout=60)
     assert wait_for(lambda: released(endpoint, 1), 30)
-    assert log.has("no --state-dir, so it starts fresh")
+    assert wait_for(lambda: log.has("no --state-dir, so it starts fresh"), 10), log.lines[-5:]  # (logged as released)
     helper("churn", "--connect", endpoint, "--n", "1", "--batch", "1", "--prefix", "f", timeout=60)
     assert wait_for(lambda: log.has("world f0 new"), 30), log.lines[-5:]
     assert procs.stop(agent) == 0

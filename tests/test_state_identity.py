@@ -269,4 +269,5 @@ def test_an_agent_given_a_checkpoint_beyond_the_wire_starts_fresh_publishes_and_
     out = _sme_status(endpoint)
     assert out.returncode == 0 and f"{world.world_id}" in out.stdout, out
     assert [f for f in os.listdir(tmp_path) if ".ckpt.npz.bad-" in f]
-    assert logs.has("set aside") and not logs.has("Traceback") and not logs.has("Value out of range"), logs.lines
+    assert wait_for(lambda: logs.has("set aside"), 10), logs.lines
+    assert not logs.has("Traceback") and not logs.has("Value out of range"), logs.lines
