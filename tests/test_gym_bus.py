@@ -127,8 +127,9 @@ def test_zoo_worlds_reach_their_in_process_figures_over_the_bus(procs, endpoint,
 
 def test_a_world_seen_through_a_camera_is_learned_over_the_bus(procs, endpoint, monkeypatch):
     """Camera frames (uint8 16 x 16 over the wire) and box moves: the agent fits motor coordinates
-    and plans over them live. In-process, seed 0: 0.009 / 0.016 / 0.015 at steps 8,629 / 14,621 /
-    20,660 (tests/spot_env.py, `distance=net`); the bar is the worst of those + 10 %."""
+    and plans over them live. In-process, seed 0: 0.0061 at step 9,603, the one version in 21,000
+    steps (`python -m sensorimotor.tools.experiments.gym_embed gym:tests.spot_env:zoo-test/Spot-v0
+    --program-param distance=net --steps 21000`); the bar is that + 10 %."""
     import os
     from pathlib import Path
 
@@ -144,7 +145,7 @@ def test_a_world_seen_through_a_camera_is_learned_over_the_bus(procs, endpoint, 
         if link is None or not link.embedding_version:
             return False
         seen.append(link.last_procrustes_error)
-        return link.last_procrustes_error <= 0.018
+        return link.last_procrustes_error <= 0.0067
 
     assert wait_for(learned, 120, every=0.5), seen[-5:]
 
