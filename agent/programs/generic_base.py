@@ -131,6 +131,9 @@ class GenericBase(Program):
     _ends: dict[int, tuple[np.ndarray, np.ndarray]]
     #: the move axes' gains of the last sweep embedded (`box_moves.axis_gains`; None: the moves' units)
     _gains: np.ndarray | None = None
+    #: start states met before the first sweep (`generic_continuous.FEW_STARTS`): the planner's
+    #: grid spans theirs
+    _starts_met: int = 0
     _pending_embedding: dict[str, Any] | None
     _last_choice: int
     retried_total: int

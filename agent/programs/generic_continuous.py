@@ -36,6 +36,10 @@ from sensorimotor.protocol.messages import EventKind, Observation
 #: a start nearer the planner's grid edge than this share of it (the grid spans the starts met with
 #: half their span on either side: a quarter of that margin) is not held, and the grid is laid again
 HOLD = 0.125
+#: over camera frames, the starts met from which on their range is trusted: the motor map places a
+#: start with its own error, so after that many a start near the edge is the map's noise, not a
+#: start the range missed (over the observation itself, a start is where it is, and always counts)
+FEW_STARTS = 8
 
 
 class GenericContinuous(GenericBase):
@@ -133,6 +137,7 @@ class GenericContinuous(GenericBase):
         self._seen_lo, self._seen_hi = np.minimum(self._seen_lo, x), np.maximum(self._seen_hi, x)
         if obs.t == 0:
             self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
+            self._starts_met += 1
         prev = self._probe_prev if obs.t > 0 else None
         if self._probe is not None and prev is not None:
             self._probe.append((prev[1], x - prev[0], prev[2]))
@@ -230,6 +235,7 @@ class GenericContinuous(GenericBase):
                 self._motor_data.append((self._motor_prev[0], self._motor_prev[1], x))
             elif obs.t == 0 and len(self._motor_starts) < 4 * self.spec.n_starts + 64:
                 self._motor_starts.append(x)
+                self._starts_met += 1
         else:
             self.background.submit(
                 "motor",
@@ -356,18 +362,22 @@ class GenericContinuous(GenericBase):
 
     def _hold_start(self, obs: Observation) -> None:
         """A start at or past the planner's grid edge (`HOLD`: the warm-up met too few starts to
-        span them, in a world of long episodes or by chance) leaves its traces no room: they run
-        off the grid, where every state is planned as the edge, and fail. Before the first sweep,
-        the grid is laid again over the starts met with this one, the plan starts afresh, and an
-        event (`grid`) says so; later, the accepted map's ends are in the grid's units, and the
-        sweeps have met every start."""
+        span them, in a world of long episodes or one whose first episodes start at a home pose)
+        leaves its traces no room: they run off the grid, where every state is planned as the
+        edge, and fail. Before the first sweep, the grid is then laid again over the starts met,
+        the plan starts afresh, and an event (`grid`) says so; later, the accepted map's ends are
+        in the grid's units, and the sweeps have met every start. Over camera frames, only while
+        fewer than `FEW_STARTS` were met."""
         if not isinstance(self.planner, ModelPlanner) or self.lspi.iterations > 0:
             return
+        if self.motor and self._starts_met >= FEW_STARTS:
+            return
+        self._starts_met += 1
         x = self._motor_map(self._raw(obs)) if self._motor_map is not None else self._flat(obs)
+        self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
         v = (x - self._lo) / self._span
         if np.all((v >= HOLD) & (v <= 1.0 - HOLD)):
             return
-        self._start_lo, self._start_hi = np.minimum(self._start_lo, x), np.maximum(self._start_hi, x)
         self._set_ranges()
         assert self.background is not None
         self.background.discard("plan")
@@ -377,8 +387,8 @@ class GenericContinuous(GenericBase):
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
-                f"a start at ({where}) of the planner's grid lies at or past its edge (the warm-up met too few "
-                "starts to span them): the grid is laid again over the starts met and the plan starts afresh",
+                f"a start at ({where}) of the planner's grid lies at or past its edge ({self._starts_met - 1} starts "
+                "met before it): the grid is laid again over the starts met and the plan starts afresh",
                 obs.step,
                 reason="grid",
                 values={f"start_{i}": float(u) for i, u in enumerate(v)},

@@ -10,6 +10,7 @@ import numpy as np
 from sensorimotor.agent.embedding.rotation_frames import Rotations
 from sensorimotor.agent.learners.lspi_features import basis_state, set_basis
 from sensorimotor.agent.learners.motor_map import MotorMap
+from sensorimotor.agent.programs.generic_continuous import FEW_STARTS
 from sensorimotor.agent.programs.generic_relearn import GenericRelearn
 
 
@@ -74,7 +75,7 @@ class GenericState(GenericRelearn):
         if self.planner is not None:
             out["moves"] = self.moves_state()  # the move size and trace distance settled (generic_continuous)
             out["planner"] = self.planner.state()
-            out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy())
+            out.update(start_lo=self._start_lo.copy(), start_hi=self._start_hi.copy(), starts_met=self._starts_met)
             out.update(warm=self._warm, seen_lo=self._seen_lo.copy(), seen_hi=self._seen_hi.copy())
             out.update(lo=self._lo.copy(), span=self._span.copy())
             # a checkpoint while the motor map's transitions are collected keeps none: they are
@@ -171,6 +172,7 @@ class GenericState(GenericRelearn):
             self.planner.restore(state["planner"])
             self._start_lo = np.asarray(state["start_lo"], dtype=np.float64)
             self._start_hi = np.asarray(state["start_hi"], dtype=np.float64)
+            self._starts_met = int(state.get("starts_met", FEW_STARTS))  # (a checkpoint from before it was kept)
             self._warm = int(state["warm"])
             self._seen_lo = np.asarray(state["seen_lo"], dtype=np.float64)
             self._seen_hi = np.asarray(state["seen_hi"], dtype=np.float64)
