@@ -170,6 +170,41 @@ def test_net_moves_of_a_body_with_uneven_axes_are_scaled_by_each_axis_gain():
     assert finals["auto"] < 0.6 * finals["off"], finals
 
 
+def test_a_hand_whose_motor_is_reversed_while_it_runs_is_relearned_in_the_units_it_senses():
+    """The loop on a box-action body: the uneven hand (one motor already reversed) learned, its
+    other motor reversed while it runs (the generic `reverse`), the drop seen, the body relearned,
+    and the relearned map again scaled by each axis's gain, a reversed axis by its size. Measured,
+    seed 0: the drop at 10,806, the relearned map 0.011 at 20,579 (0.078 with `axis_gains=off`)."""
+    from sensorimotor.agent.detectors import make_detector
+    from sensorimotor.protocol.messages import Control, EventKind, Trigger
+    from sensorimotor.worlds.body_changes.layer import BodyChanges
+
+    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
+    if "planner-test/UnevenPointMass-v0" not in gym.envs.registry:
+        gym.register(
+            "planner-test/UnevenPointMass-v0",
+            entry_point=lambda: EmbeddableEnv(UnevenPointMass(), lattice, _place, np.array(lattice)),
+            max_episode_steps=100,
+        )
+    at = 10_000
+    with make_world("gym:planner-test/UnevenPointMass-v0", "upm", 0) as inner:
+        world = BodyChanges(inner)
+        program = make_program(world.spec(), 0, embed_every=1500, sarsa_warmup=300)
+        run = run_inprocess(
+            world,
+            program,
+            30_000,
+            detector=make_detector("cusum", **program.detector_params),
+            perturb=lambda k: Control("upm", "reverse", {"index": "1"}) if k == at else None,
+            stop_when=lambda r: any(e.trigger == Trigger.RELEARNED for e in r.embeddings),
+        )
+    drops = run.events(EventKind.DROP_DETECTED)
+    assert drops and at < drops[0].step <= at + 1_500, [d.step for d in drops]
+    relearned = next(e for e in run.embeddings if e.trigger == Trigger.RELEARNED)
+    assert relearned.metrics["goal_reached_fraction"] == 1.0
+    assert relearned.procrustes_error < 0.03, relearned.procrustes_error
+
+
 def test_a_start_the_warm_up_never_met_is_taken_into_the_planners_grid():
     """A world whose first episodes all start at one home pose: the warm-up meets one start, and
     the grid laid over its walk leaves the far starts off it, where every trace fails. The first
