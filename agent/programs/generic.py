@@ -170,6 +170,7 @@ class GenericProgram(GenericSweeps, GenericPublish, GenericTables, GenericContin
         self._since_plan, self._fresh = 0, False  # planner / model learner: transitions since the last plan
         self._plan_exact = False  # model learner: the plan installed was made from the complete model as it is
         self._start_lo, self._start_hi = np.full(d, np.inf), np.full(d, -np.inf)  # start observations met warming up
+        self._early = []  # the model planner's transitions before the first sweep (generic_continuous)
         self._swept_policy, self._since_sweep = None, 0  # model learner: the policy swept last, transitions since
         self._plan_for_sweep = False  # the plan in flight is swept when it is swapped in
         self.use_background(prm.learn_lag)

@@ -134,6 +134,8 @@ class GenericBase(Program):
     #: start states met before the first sweep (`generic_continuous.FEW_STARTS`): the planner's
     #: grid spans theirs
     _starts_met: int = 0
+    #: the planner's transitions before the first sweep, unscaled (generic_continuous._hold_start)
+    _early: list[tuple[np.ndarray, int, np.ndarray, str]]
     _pending_embedding: dict[str, Any] | None
     _last_choice: int
     retried_total: int

@@ -327,6 +327,7 @@ class GenericContinuous(GenericBase):
         if obs.t > 0 and self._prev_x is not None and self._prev is not None:
             outcome = "goal" if reached(self.goal, obs) else "failure" if failed(self.goal, obs) else "continue"
             fresh = self.planner.observe(self._prev_x, self._prev[1], x, outcome)
+            self._keep_early(self._prev_x, self._prev[1], x, outcome)
             self.new_samples += 1
             self._since_plan += 1
             self._fresh = self._fresh or fresh
@@ -360,15 +361,26 @@ class GenericContinuous(GenericBase):
             return Decision(reset=True, start=-1)
         return Decision(tuple(float(v) for v in self.actions[a]))
 
+    def _keep_early(self, x0: np.ndarray, a: int, x1: np.ndarray, outcome: str) -> None:
+        """Before the first sweep, the model planner's transitions are kept unscaled (at most
+        `embed_every` of them): a grid laid again (`_hold_start`) learns them again."""
+        if (
+            self.lspi.iterations == 0
+            and isinstance(self.planner, ModelPlanner)
+            and len(self._early) < self.params.embed_every
+        ):
+            self._early.append((x0 * self._span + self._lo, a, x1 * self._span + self._lo, outcome))
+
     def _hold_start(self, obs: Observation) -> None:
         """A start at or past the planner's grid edge (`HOLD`: the warm-up met too few starts to
         span them, in a world of long episodes or one whose first episodes start at a home pose)
         leaves its traces no room: they run off the grid, where every state is planned as the
         edge, and fail. Before the first sweep, the grid is then laid again over the starts met,
-        the plan starts afresh, and an event (`grid`) says so; later, the accepted map's ends are
-        in the grid's units, and the sweeps have met every start. Over camera frames, only while
-        fewer than `FEW_STARTS` were met."""
+        the planner learns the transitions so far again on it, and an event (`grid`) says so;
+        later, the accepted map's ends are in the grid's units, and the sweeps have met every
+        start. Over camera frames, only while fewer than `FEW_STARTS` were met."""
         if not isinstance(self.planner, ModelPlanner) or self.lspi.iterations > 0:
+            self._early = []
             return
         if self.motor and self._starts_met >= FEW_STARTS:
             return
@@ -382,13 +394,15 @@ class GenericContinuous(GenericBase):
         assert self.background is not None
         self.background.discard("plan")
         self.planner = self._new_planner(self.planner.dims)
-        self._fresh, self._since_plan, self.new_samples = False, 0, 0
+        for x0, a, x1, outcome in self._early:  # what was learned, on the new grid
+            self.planner.observe((x0 - self._lo) / self._span, a, (x1 - self._lo) / self._span, outcome)
+        self._fresh, self._since_plan = True, 0
         where = ", ".join(f"{u:.2f}" for u in v)
         self.emit(
             EventOutput(
                 EventKind.POLICY_ITERATION,
                 f"a start at ({where}) of the planner's grid lies at or past its edge ({self._starts_met - 1} starts "
-                "met before it): the grid is laid again over the starts met and the plan starts afresh",
+                "met before it): the grid is laid again over the starts met, and what was learned is learned on it",
                 obs.step,
                 reason="grid",
                 values={f"start_{i}": float(u) for i, u in enumerate(v)},
