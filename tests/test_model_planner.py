@@ -236,6 +236,27 @@ def test_a_start_the_warm_up_never_met_is_taken_into_the_planners_grid():
     assert last.metrics["goal_reached_fraction"] == 1.0 and last.procrustes_error < 0.02, last.procrustes_error
 
 
+def test_a_world_of_long_episodes_is_mapped_at_the_defaults():
+    """1,000-step episodes: the warm-up's 1,000 random steps meet one start. At the defaults the
+    grid is laid again as starts off it are met, and every start is mapped. Measured, seed 0:
+    0.008 from all 16 starts at 11,246 (without the grid rule 0.57 from 11 of them at 40,000)."""
+    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
+    gym.register(
+        "planner-test/LongPointMass-v0",
+        entry_point=lambda: EmbeddableEnv(PointMass(), lattice, _place, np.array(lattice)),
+        max_episode_steps=1000,
+    )
+    try:
+        with make_world("gym:planner-test/LongPointMass-v0", "long", 0) as w:
+            program = make_program(w.spec(), 0)
+            run = run_inprocess(w, program, 12_000)
+    finally:
+        del gym.envs.registry["planner-test/LongPointMass-v0"]
+    assert [e for e in run.events("policy_iteration") if e.reason == "grid"]
+    last = run.embeddings[-1]
+    assert last.metrics["goal_reached_fraction"] == 1.0 and last.procrustes_error < 0.02, last.procrustes_error
+
+
 def test_net_distance_compares_where_box_traces_add_up_to_not_their_order():
     from sensorimotor.agent.programs.generic import embed_job
 
