@@ -3,7 +3,9 @@ a point mass in a square that it learns to steer to a small goal with canonical 
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+from collections.abc import Callable, Iterator
 
 import gymnasium as gym
 import numpy as np
@@ -16,6 +18,7 @@ from sensorimotor.worlds.registry import make_world
 
 ACTIONS = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=2)))
 GOAL = np.array([0.5, 0.5])
+LATTICE = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]  # 16 starts
 
 
 def test_interpolation_reproduces_linear_functions_and_weights_sum_to_one():
@@ -106,16 +109,36 @@ def _place(env, p):
     return env.unwrapped.x.astype(np.float32)
 
 
+@contextlib.contextmanager
+def _lattice_world(
+    name: str,
+    body: Callable[[], gym.Env],
+    world_id: str,
+    place: Callable = _place,
+    episode_steps: int = 100,
+    lattice: list | None = None,
+    seed: int = 0,
+) -> Iterator:
+    """`body()` served as ``gym:planner-test/NAME-v0`` with `lattice` (default `LATTICE`) as its
+    start states, registered for this test alone: the world of `seed`."""
+    starts = LATTICE if lattice is None else lattice
+    env_id = f"planner-test/{name}-v0"
+    gym.register(
+        env_id,
+        entry_point=lambda: EmbeddableEnv(body(), starts, place, np.array(starts)),
+        max_episode_steps=episode_steps,
+    )
+    try:
+        with make_world(f"gym:{env_id}", world_id, seed) as w:
+            yield w
+    finally:
+        del gym.envs.registry[env_id]
+
+
 def test_the_generic_program_plans_a_box_action_world_and_embeds_its_lattice():
     """learner=auto picks the planner for a 2-value observation with 2-D box actions; it reaches
     the goal from every start of a 4 x 4 lattice and the traces embed the lattice."""
-    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
-    gym.register(
-        "planner-test/PointMass-v0",
-        entry_point=lambda: EmbeddableEnv(PointMass(), lattice, _place, np.array(lattice)),
-        max_episode_steps=40,
-    )
-    with make_world("gym:planner-test/PointMass-v0", "pm", 0) as w:
+    with _lattice_world("PointMass", PointMass, "pm", episode_steps=40) as w:
         spec = w.spec()
         assert spec.goal == "terminated" and spec.n_starts == 16
         program = make_program(spec, 0, embed_every=1500, sarsa_warmup=300)
@@ -143,16 +166,9 @@ def test_net_moves_of_a_body_with_uneven_axes_are_scaled_by_each_axis_gain():
     the map twice over across; the program measures each axis's gain from its sweeps (said in an
     `axis_gains` event; a reversed axis by its size) and the map comes out in the units the body
     senses. `axis_gains=off` keeps the moves' units."""
-    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
-    if "planner-test/UnevenPointMass-v0" not in gym.envs.registry:
-        gym.register(
-            "planner-test/UnevenPointMass-v0",
-            entry_point=lambda: EmbeddableEnv(UnevenPointMass(), lattice, _place, np.array(lattice)),
-            max_episode_steps=100,
-        )
     finals = {}
     for gains in ("auto", "off"):
-        with make_world("gym:planner-test/UnevenPointMass-v0", "upm", 0) as w:
+        with _lattice_world("UnevenPointMass", UnevenPointMass, "upm") as w:
             program = make_program(w.spec(), 0, embed_every=1500, sarsa_warmup=300, axis_gains=gains)
             run = run_inprocess(w, program, 15_000)
         said = [e for e in run.events("policy_iteration") if e.reason == "axis_gains"]
@@ -179,15 +195,8 @@ def test_a_hand_whose_motor_is_reversed_while_it_runs_is_relearned_in_the_units_
     from sensorimotor.protocol.messages import Control, EventKind, Trigger
     from sensorimotor.worlds.body_changes.layer import BodyChanges
 
-    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
-    if "planner-test/UnevenPointMass-v0" not in gym.envs.registry:
-        gym.register(
-            "planner-test/UnevenPointMass-v0",
-            entry_point=lambda: EmbeddableEnv(UnevenPointMass(), lattice, _place, np.array(lattice)),
-            max_episode_steps=100,
-        )
     at = 10_000
-    with make_world("gym:planner-test/UnevenPointMass-v0", "upm", 0) as inner:
+    with _lattice_world("UnevenPointMass", UnevenPointMass, "upm") as inner:
         world = BodyChanges(inner)
         program = make_program(world.spec(), 0, embed_every=1500, sarsa_warmup=300)
         run = run_inprocess(
@@ -211,24 +220,15 @@ def test_a_start_the_warm_up_never_met_is_taken_into_the_planners_grid():
     such start met is taken in (a `grid` event), what was learned is learned again on the new grid,
     and every start is reached. Measured, seed 0, 7,500 steps: 0.006 from all 16 starts; without
     it, 0.90 from 2 of them."""
-    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
     resets = [0]
 
     def home_first(env, p):
         resets[0] += 1
         return _place(env, (0.86, 0.86) if resets[0] <= 4 else p)  # the warm-up's episodes
 
-    gym.register(
-        "planner-test/HomeFirstPointMass-v0",
-        entry_point=lambda: EmbeddableEnv(PointMass(), lattice, home_first, np.array(lattice)),
-        max_episode_steps=100,
-    )
-    try:
-        with make_world("gym:planner-test/HomeFirstPointMass-v0", "home", 0) as w:
-            program = make_program(w.spec(), 0, embed_every=1500, sarsa_warmup=300)
-            run = run_inprocess(w, program, 7_500)
-    finally:
-        del gym.envs.registry["planner-test/HomeFirstPointMass-v0"]
+    with _lattice_world("HomeFirstPointMass", PointMass, "home", place=home_first) as w:
+        program = make_program(w.spec(), 0, embed_every=1500, sarsa_warmup=300)
+        run = run_inprocess(w, program, 7_500)
     said = [e for e in run.events("policy_iteration") if e.reason == "grid"]
     assert said and min(said[0].values.values()) < 0.0, [e.detail for e in run.events("policy_iteration")]
     assert all(e.step < run.embeddings[0].step for e in said)  # before the first sweep only
@@ -240,18 +240,9 @@ def test_a_world_of_long_episodes_is_mapped_at_the_defaults():
     """1,000-step episodes: the warm-up's 1,000 random steps meet one start. At the defaults the
     grid is laid again as starts off it are met, and every start is mapped. Measured, seed 0:
     0.008 from all 16 starts at 11,246 (without the grid rule 0.57 from 11 of them at 40,000)."""
-    lattice = [tuple(p) for p in itertools.product((0.14, 0.38, 0.62, 0.86), repeat=2)]
-    gym.register(
-        "planner-test/LongPointMass-v0",
-        entry_point=lambda: EmbeddableEnv(PointMass(), lattice, _place, np.array(lattice)),
-        max_episode_steps=1000,
-    )
-    try:
-        with make_world("gym:planner-test/LongPointMass-v0", "long", 0) as w:
-            program = make_program(w.spec(), 0)
-            run = run_inprocess(w, program, 12_000)
-    finally:
-        del gym.envs.registry["planner-test/LongPointMass-v0"]
+    with _lattice_world("LongPointMass", PointMass, "long", episode_steps=1000) as w:
+        program = make_program(w.spec(), 0)
+        run = run_inprocess(w, program, 12_000)
     assert [e for e in run.events("policy_iteration") if e.reason == "grid"]
     last = run.embeddings[-1]
     assert last.metrics["goal_reached_fraction"] == 1.0 and last.procrustes_error < 0.02, last.procrustes_error
@@ -277,13 +268,7 @@ def test_net_distance_compares_where_box_traces_add_up_to_not_their_order():
 
 def test_the_generic_program_saves_and_restores_its_planner():
     lattice = [tuple(p) for p in itertools.product((0.2, 0.5, 0.8), repeat=2)]
-    if "planner-test/PointMass3-v0" not in gym.envs.registry:
-        gym.register(
-            "planner-test/PointMass3-v0",
-            entry_point=lambda: EmbeddableEnv(PointMass(), lattice, _place, np.array(lattice)),
-            max_episode_steps=40,
-        )
-    with make_world("gym:planner-test/PointMass3-v0", "pm3", 1) as w:
+    with _lattice_world("PointMass3", PointMass, "pm3", episode_steps=40, lattice=lattice, seed=1) as w:
         spec = w.spec()
         a = make_program(spec, 1, embed_every=700, sarsa_warmup=200)
         run_inprocess(w, a, 1_200)
